@@ -1,0 +1,98 @@
+"""The subcommands of ./mvpose, run inside the built environment.
+
+./mvpose (the front door at the top of the repository) sets up .venv and
+ros_ws/install, sources ros_ws/install/local_setup.bash and then runs
+`python -m mvpose_nodes.cli ARGS`. Tools that are also ROS executables
+(bag, topic, launch) keep their own argument parsers; this module only
+routes to them, so `./mvpose bag play X` and `ros2 run mvpose_nodes bag play X`
+behave the same.
+"""
+import argparse
+import os
+import shutil
+import sys
+from pathlib import Path
+
+from mvpose_nodes.errors import exit_on_user_error, UserError
+
+PACKAGE = 'mvpose_nodes'
+
+# Subcommands that hand the rest of the command line to another tool's own parser.
+ROUTED_TOOLS = {
+    'bag': ('mvpose_nodes.bag_cli', 'record, play or inspect rosbag2 MCAP bags'),
+    'topic': ('mvpose_nodes.topic_cli', 'echo, list, measure or publish live topics'),
+    'launch': ('mvpose_nodes.launcher', 'start the nodes of a launch YAML file as separate processes'),
+    'demo': ('mvpose_nodes.demo', 'replay a bag through the graph and show the skeleton (README command 1)'),
+}
+
+
+def repository_root():
+    """The checkout that ./mvpose runs from (MVPOSE_ROOT is set by the front door)."""
+    root = os.environ.get('MVPOSE_ROOT')
+    if not root:
+        raise UserError('MVPOSE_ROOT is not set: run this through ./mvpose at the top of the repository')
+    return Path(root)
+
+
+def executable_path(name):
+    """The console script `name` of mvpose_nodes, where `ros2 run mvpose_nodes NAME` finds it."""
+    for prefix in os.environ.get('AMENT_PREFIX_PATH', '').split(os.pathsep):
+        candidate = Path(prefix, 'lib', PACKAGE, name)
+        if prefix and candidate.is_file() and os.access(candidate, os.X_OK):
+            return candidate
+    known = sorted({p.name for prefix in os.environ.get('AMENT_PREFIX_PATH', '').split(os.pathsep) if prefix
+                    for p in Path(prefix, 'lib', PACKAGE).glob('*') if p.is_file()})
+    raise UserError(f"no executable '{name}' in package {PACKAGE} (known: {', '.join(known) or 'none'})")
+
+
+def build_parser():
+    parser = argparse.ArgumentParser(
+        prog='./mvpose',
+        description='mvpose: markerless multi-camera 3D human motion capture on ROS 2 Jazzy. '
+                    'Every call first makes sure .venv and ros_ws are set up (cheap when nothing changed).')
+    commands = parser.add_subparsers(dest='command', metavar='COMMAND', required=True)
+    for name, (_, summary) in ROUTED_TOOLS.items():
+        routed = commands.add_parser(name, help=summary, add_help=False)
+        routed.add_argument('args', nargs=argparse.REMAINDER)
+    test = commands.add_parser('test', help='run the test suite (pytest; extra arguments go to pytest)',
+                               add_help=False)
+    test.add_argument('args', nargs=argparse.REMAINDER)
+    run = commands.add_parser('run', help='run a node or tool of mvpose_nodes, like `ros2 run mvpose_nodes`',
+                              description='Run EXECUTABLE of mvpose_nodes with the rest of the command line, '
+                                          'e.g. ./mvpose run camera_features --ros-args -r __ns:=/cam3')
+    run.add_argument('executable')
+    run.add_argument('args', nargs=argparse.REMAINDER, help='arguments for the executable (e.g. --ros-args ...)')
+    execute = commands.add_parser('exec', help='run any command inside the built environment',
+                                  description='Run CMD with .venv and ros_ws/install on the environment, '
+                                              'e.g. ./mvpose exec python -c "import rclpy"')
+    execute.add_argument('cmd', nargs=argparse.REMAINDER, metavar='CMD')
+    return parser
+
+
+def main(argv=None):
+    argv = sys.argv[1:] if argv is None else argv
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    with exit_on_user_error(f'./mvpose {args.command}'):
+        if args.command in ROUTED_TOOLS:
+            module = __import__(ROUTED_TOOLS[args.command][0], fromlist=['main'])
+            return module.main(args.args, prog=f'./mvpose {args.command}')
+        if args.command == 'test':
+            root = repository_root()
+            os.chdir(root)
+            command = [sys.executable, '-m', 'pytest', 'tests', *args.args]
+            os.execv(sys.executable, command)
+        if args.command == 'run':
+            path = executable_path(args.executable)
+            os.execv(path, [str(path), *args.args])
+        if args.command == 'exec':
+            if not args.cmd:
+                raise UserError('exec needs a command, e.g. ./mvpose exec python -c "import rclpy"')
+            if shutil.which(args.cmd[0]) is None:
+                raise UserError(f"command not found: '{args.cmd[0]}'")
+            os.execvp(args.cmd[0], args.cmd)
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,33 @@
+from glob import glob
+
+from setuptools import find_packages, setup
+
+PACKAGE = 'mvpose_nodes'
+
+# Every node and tool is a console script in lib/mvpose_nodes, where `ros2 run` finds it.
+EXECUTABLES = {
+    'bag': 'mvpose_nodes.bag_cli:main',
+    'topic': 'mvpose_nodes.topic_cli:main',
+    'launch': 'mvpose_nodes.launcher:main',
+}
+
+setup(
+    name=PACKAGE,
+    version='0.1.0',
+    packages=find_packages(exclude=['test']),
+    data_files=[
+        ('share/ament_index/resource_index/packages', [f'resource/{PACKAGE}']),
+        (f'share/{PACKAGE}', ['package.xml']),
+        (f'share/{PACKAGE}/config', glob('config/*.yaml')),
+        (f'share/{PACKAGE}/launch', glob('launch/*.py')),
+    ],
+    install_requires=['setuptools'],
+    zip_safe=True,
+    maintainer='mvpose maintainers',
+    maintainer_email='maintainers@mvpose.dev',
+    description='mvpose nodes and tools',
+    license='Apache-2.0',
+    entry_points={
+        'console_scripts': [f'{name} = {target}' for name, target in EXECUTABLES.items()],
+    },
+)
