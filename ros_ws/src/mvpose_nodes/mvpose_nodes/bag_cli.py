@@ -10,7 +10,7 @@ import sys
 import time
 
 from mvpose_nodes.bagfile import BagReader, BagWriter, directory_size
-from mvpose_nodes.errors import UserError, exit_on_user_error
+from mvpose_nodes.errors import ArgumentParser, UserError, exit_on_user_error
 from mvpose_nodes.interfaces import message_class
 
 # Topics that carry calibration: latched on playback so that nodes started late still get them.
@@ -20,7 +20,7 @@ DRAIN_TIME = 0.5  # [s] how long `record` keeps taking messages after Ctrl-C
 
 
 def build_parser(prog):
-    parser = argparse.ArgumentParser(prog=prog, description=__doc__.splitlines()[0])
+    parser = ArgumentParser(prog=prog, description=__doc__.splitlines()[0])
     verbs = parser.add_subparsers(dest='verb', metavar='VERB', required=True)
 
     record = verbs.add_parser('record', help='record live topics into a new bag directory',
@@ -45,6 +45,10 @@ def build_parser(prog):
     play.add_argument('-d', '--delay', type=float, default=0.0, metavar='S',
                       help='wait S seconds after creating the publishers before the first message '
                            '(gives subscribers time to discover them)')
+    play.add_argument('--wait-for-subscribers', type=float, nargs='?', const=30.0, default=0.0, metavar='S',
+                      help='before the first message, wait up to S seconds (default 30 when given) until every '
+                           'played topic (and /clock with --clock) has a matched subscriber, so that a graph started beside the player '
+                           'loses nothing (then --delay still applies)')
     play.add_argument('--clock', type=float, nargs='?', const=40.0, default=0.0, metavar='HZ',
                       help='also publish the bag time on /clock at HZ (default 40 when given)')
 
@@ -94,8 +98,8 @@ def describe(bag, path):
 def play(args):
     if args.rate <= 0:
         raise UserError(f'--rate must be > 0 (got {args.rate})')
-    if args.start_offset < 0 or args.delay < 0 or args.clock < 0:
-        raise UserError('--start-offset, --delay and --clock must not be negative')
+    if min(args.start_offset, args.delay, args.clock, args.wait_for_subscribers) < 0:
+        raise UserError('--start-offset, --delay, --clock and --wait-for-subscribers must not be negative')
     bag = BagReader(args.bag)
     topics = list(bag.topics) if not args.topics else args.topics
     missing = [t for t in topics if t not in bag.topics]
@@ -118,6 +122,9 @@ def play(args):
                 qos.durability = DurabilityPolicy.TRANSIENT_LOCAL
             publishers[topic] = node.create_publisher(classes[topic], topic, qos)
         clock = node.create_publisher(Clock, '/clock', 10) if args.clock else None
+        if args.wait_for_subscribers:
+            wait_for_subscribers({**publishers, **({'/clock': clock} if clock else {})},
+                                 args.wait_for_subscribers, stop)
         stop.event.wait(args.delay)
         begin_ns = bag.start_ns + int(args.start_offset * 1e9)
         played = 0
@@ -130,6 +137,16 @@ def play(args):
         finally:
             node.destroy_node()
     print(f'[play] published {played} messages on {len(topics)} topics', file=sys.stderr)
+
+
+def wait_for_subscribers(publishers, timeout, stop):
+    deadline = time.monotonic() + timeout
+    unmatched = list(publishers)
+    while unmatched and time.monotonic() < deadline and not stop.stopped:
+        stop.event.wait(0.05)
+        unmatched = [topic for topic, publisher in publishers.items() if publisher.get_subscription_count() == 0]
+    if unmatched:
+        print(f"[play] no subscriber after {timeout:g} s on: {', '.join(unmatched)}; playing anyway", file=sys.stderr)
 
 
 def play_once(bag, topics, begin_ns, publishers, clock, args, stop):

@@ -15,7 +15,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import yaml
-from mcap.exceptions import McapError
 from mcap.reader import NonSeekingReader, make_reader
 from mcap.writer import CompressionType, Writer
 
@@ -27,6 +26,7 @@ METADATA_VERSION = 9  # rosbag2 in Jazzy
 ROS_DISTRO = 'jazzy'
 SERIALIZATION_FORMAT = 'cdr'
 CHUNK_SIZE = 4 * 1024 * 1024  # [bytes] large enough for a few 1080p JPEGs per chunk
+MCAP_MAGIC = b'\x89MCAP0\r\n'
 
 # A QoS profile as rosbag2 stores it (metadata version 9 spelling). Durations are {sec, nsec};
 # 0/0 means "the middleware's default", as in rclpy.
@@ -204,7 +204,12 @@ class BagReader:
         return files
 
     def _summary(self, mcap_path, stream):
-        """The file's summary; scanning the whole file when it has none. Raises UserError if damaged."""
+        """The file's summary; scanning the whole file when it has none. Raises UserError if damaged.
+
+        Any failure of the MCAP parser means a damaged file, whatever the parser raised."""
+        if stream.read(len(MCAP_MAGIC)) != MCAP_MAGIC:
+            raise UserError(f"'{mcap_path}' is not an MCAP file (it does not start with the MCAP magic bytes)")
+        stream.seek(0)
         try:
             reader = make_reader(stream)
             profile = reader.get_header().profile
@@ -220,9 +225,9 @@ class BagReader:
             return summary
         except UserError:
             raise
-        except (McapError, EOFError, ValueError, KeyError, OSError, AssertionError) as error:
-            reason = type(error).__name__ if not str(error) else str(error).splitlines()[0]
-            raise UserError(f"'{mcap_path}' is not a readable MCAP file (truncated or damaged: {reason})") from None
+        except Exception as error:  # noqa: BLE001 (see docstring)
+            reason = str(error).splitlines()[0] if str(error) else type(error).__name__
+            raise UserError(f"'{mcap_path}' is truncated or damaged ({reason})") from None
 
     def _add_summary(self, mcap_path):
         with open(mcap_path, 'rb') as stream:
@@ -260,8 +265,9 @@ class BagReader:
             for _, channel, message in make_reader(stream).iter_messages(
                     topics=topics, start_time=start_ns, log_time_order=True):
                 yield self.topics[channel.topic], message.log_time, message.data
-        except (McapError, EOFError, ValueError, OSError) as error:
-            raise UserError(f"'{path}': damaged while reading messages ({error})") from None
+        except Exception as error:  # noqa: BLE001: any parser failure here means a damaged file
+            reason = str(error).splitlines()[0] if str(error) else type(error).__name__
+            raise UserError(f"'{path}' is damaged: reading messages failed ({reason})") from None
 
 
 def directory_size(path):

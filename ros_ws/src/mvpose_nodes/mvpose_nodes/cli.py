@@ -13,7 +13,8 @@ import shutil
 import sys
 from pathlib import Path
 
-from mvpose_nodes.errors import exit_on_user_error, UserError
+from mvpose_nodes.errors import ArgumentParser, UserError, exit_on_user_error
+from mvpose_nodes.launcher import package_executable
 
 PACKAGE = 'mvpose_nodes'
 
@@ -34,19 +35,8 @@ def repository_root():
     return Path(root)
 
 
-def executable_path(name):
-    """The console script `name` of mvpose_nodes, where `ros2 run mvpose_nodes NAME` finds it."""
-    for prefix in os.environ.get('AMENT_PREFIX_PATH', '').split(os.pathsep):
-        candidate = Path(prefix, 'lib', PACKAGE, name)
-        if prefix and candidate.is_file() and os.access(candidate, os.X_OK):
-            return candidate
-    known = sorted({p.name for prefix in os.environ.get('AMENT_PREFIX_PATH', '').split(os.pathsep) if prefix
-                    for p in Path(prefix, 'lib', PACKAGE).glob('*') if p.is_file()})
-    raise UserError(f"no executable '{name}' in package {PACKAGE} (known: {', '.join(known) or 'none'})")
-
-
 def build_parser():
-    parser = argparse.ArgumentParser(
+    parser = ArgumentParser(
         prog='./mvpose',
         description='mvpose: markerless multi-camera 3D human motion capture on ROS 2 Jazzy. '
                     'Every call first makes sure .venv and ros_ws are set up (cheap when nothing changed).')
@@ -80,10 +70,16 @@ def main(argv=None):
         if args.command == 'test':
             root = repository_root()
             os.chdir(root)
-            command = [sys.executable, '-m', 'pytest', 'tests', *args.args]
+            # The whole suite unless the user names tests (paths or node ids) to run.
+            names_tests = any(not a.startswith('-') and (os.path.exists(a.split('::')[0])) for a in args.args)
+            command = [sys.executable, '-m', 'pytest', *([] if names_tests else ['tests']), *args.args]
             os.execv(sys.executable, command)
         if args.command == 'run':
-            path = executable_path(args.executable)
+            path = package_executable(PACKAGE, args.executable)
+            if path is None:
+                known = sorted(p.name for prefix in filter(None, os.environ.get('AMENT_PREFIX_PATH', '').split(os.pathsep))
+                               for p in Path(prefix, 'lib', PACKAGE).glob('*') if os.access(p, os.X_OK))
+                raise UserError(f"no executable '{args.executable}' in package {PACKAGE} (it has: {', '.join(known)})")
             os.execv(path, [str(path), *args.args])
         if args.command == 'exec':
             if not args.cmd:

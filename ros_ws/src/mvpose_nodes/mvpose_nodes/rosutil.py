@@ -106,13 +106,15 @@ def topic_types(node):
     return {name: types[0] for name, types in node.get_topic_names_and_types() if types}
 
 
-def wait_for_topic_type(node, topic, timeout, stop=None):
-    """Spin until `topic` appears in the graph; its type name, or None after `timeout` [s]."""
+def wait_for_publishers(node, topic, timeout, stop=None):
+    """Spin until `topic` has a publisher; the type name it publishes, or None after `timeout` [s].
+
+    Subscribing only then lets the subscription QoS match the publishers (see subscription_qos_for)."""
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline and not (stop and stop.stopped):
-        found = topic_types(node).get(topic)
-        if found:
-            return found
+        publishers = node.get_publishers_info_by_topic(topic)
+        if publishers:
+            return publishers[0].topic_type
         rclpy.spin_once(node, timeout_sec=0.1)
     return None
 

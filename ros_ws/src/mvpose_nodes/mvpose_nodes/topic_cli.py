@@ -6,14 +6,14 @@ import time
 
 import yaml
 
-from mvpose_nodes.errors import UserError, exit_on_user_error
+from mvpose_nodes.errors import ArgumentParser, UserError, exit_on_user_error
 from mvpose_nodes.interfaces import full_type_name, message_class
 
 DISCOVERY_TIME = 1.0  # [s] default wait for the graph to be discovered
 
 
 def build_parser(prog):
-    parser = argparse.ArgumentParser(prog=prog, description=__doc__.splitlines()[0])
+    parser = ArgumentParser(prog=prog, description=__doc__.splitlines()[0])
     verbs = parser.add_subparsers(dest='verb', metavar='VERB', required=True)
 
     echo = verbs.add_parser('echo', help='print the messages of a topic as YAML',
@@ -21,7 +21,7 @@ def build_parser(prog):
                                         'like ros2 topic echo. The subscription QoS is adapted to the '
                                         'publishers (reliable / transient-local only if all of them are).')
     echo.add_argument('topic')
-    echo.add_argument('type', nargs='?', help='message type, e.g. mvpose_msgs/msg/Skeleton (default: from the graph)')
+    echo.add_argument('type', nargs='?', help='message type, e.g. mvpose_msgs/msg/Skeleton (default: what the publishers publish)')
     echo.add_argument('--once', action='store_true', help='print one message and exit')
     echo.add_argument('-n', '--count', type=int, metavar='N', help='exit after N messages')
     echo.add_argument('--field', metavar='PATH', help='print only this field, e.g. header.stamp or joints.0.position')
@@ -30,7 +30,7 @@ def build_parser(prog):
     echo.add_argument('--no-str', action='store_true', help='show strings as their length')
     echo.add_argument('-l', '--truncate-length', type=int, metavar='N', help='cut strings and arrays at N items')
     echo.add_argument('--timeout', type=float, metavar='S',
-                      help='give up with exit code 1 if no message arrived within S seconds')
+                      help='give up with exit code 1 if no publisher appeared or no message arrived within S seconds')
 
     listing = verbs.add_parser('list', help='list the topics of the graph',
                                description='List the live topics, like ros2 topic list.')
@@ -81,9 +81,12 @@ def _formatter(args):
         is_message = hasattr(value, 'get_fields_and_field_types')
         if args.csv:
             return msgdict.message_to_csv(value, **options) if is_message else str(value)
-        text = msgdict.message_to_yaml(value, **options) if is_message else yaml.safe_dump(
-            _plain(value), default_flow_style=False, allow_unicode=True, width=math.inf)
-        return text + '---'
+        if is_message:
+            return msgdict.message_to_yaml(value, **options) + '---'
+        plain = _plain(value)
+        if isinstance(plain, (list, dict)):
+            return yaml.safe_dump(plain, default_flow_style=False, allow_unicode=True, width=math.inf) + '---'
+        return f'{plain}\n---'
     return render
 
 
@@ -103,21 +106,20 @@ def echo(args):
         message_class(args.type)
     import rclpy
     from mvpose_nodes.msgdict import FieldError
-    from mvpose_nodes.rosutil import StopSignal, subscription_qos_for, wait_for_topic_type
+    from mvpose_nodes.rosutil import StopSignal, subscription_qos_for, wait_for_publishers
 
     render = _formatter(args)
     limit = 1 if args.once else args.count
     started = time.monotonic()
     with StopSignal() as stop:
         node = rclpy.create_node('mvpose_topic_echo')
-        type_name = args.type
-        if not type_name:
-            type_name = wait_for_topic_type(node, args.topic, args.timeout if args.timeout else math.inf, stop)
-            if type_name is None:
-                if stop.stopped:
-                    return 130
-                raise UserError(f"topic '{args.topic}' did not appear within {args.timeout} s")
-        msg_class = message_class(type_name)
+        published_type = wait_for_publishers(node, args.topic, args.timeout or math.inf, stop)
+        if published_type is None:
+            if stop.stopped:
+                return 130
+            print(f'topic echo: no publisher on {args.topic} within {args.timeout} s', file=sys.stderr)
+            return 1
+        msg_class = message_class(args.type or published_type)
         received = []
 
         def show(msg):
@@ -163,14 +165,14 @@ def rate_statistics(stamps, window):
 
 def hz(args):
     import rclpy
-    from mvpose_nodes.rosutil import StopSignal, subscription_qos_for, wait_for_topic_type
+    from mvpose_nodes.rosutil import StopSignal, subscription_qos_for, wait_for_publishers
     with StopSignal() as stop:
         node = rclpy.create_node('mvpose_topic_hz')
-        type_name = wait_for_topic_type(node, args.topic, args.duration or math.inf, stop)
-        if type_name is None:
+        published_type = wait_for_publishers(node, args.topic, args.duration or math.inf, stop)
+        if published_type is None:
             return 130 if stop.stopped else 1
         stamps = []
-        node.create_subscription(message_class(type_name), args.topic, lambda _: stamps.append(time.monotonic()),
+        node.create_subscription(message_class(published_type), args.topic, lambda _: stamps.append(time.monotonic()),
                                  subscription_qos_for(node, args.topic), raw=True)
         started = next_report = time.monotonic()
         while not stop.stopped and not (args.duration and time.monotonic() - started > args.duration):

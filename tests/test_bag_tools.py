@@ -1,0 +1,249 @@
+"""bag record / play / info and topic echo, run as the separate processes a user starts,
+talking over DDS on loopback; bags checked with the independent `rosbags` reader."""
+import time
+from pathlib import Path
+
+import pytest
+import yaml
+from conftest import Background, assert_one_line_error, run_mvpose
+from mvpose_msgs.msg import Skeleton
+from rosbags.highlevel import AnyReader
+from rosgraph_msgs.msg import Clock
+from samples import sample_skeleton
+from sensor_msgs.msg import CameraInfo
+
+from mvpose_nodes.bagfile import BagReader
+from mvpose_nodes.msgdict import set_message_fields
+
+SKELETON_TOPIC = '/test/skeleton'
+CAMERA_INFO_TOPIC = '/cam3/camera_info'
+SKELETON_TYPE = 'mvpose_msgs/msg/Skeleton'
+FRAMES = 5
+# Play only once this process's subscriptions are matched, so that none of the first messages is lost.
+WAIT = ('--wait-for-subscribers', '--delay', 0.5)
+
+# Publishes FRAMES Skeletons (seeds 0..4) and one latched CameraInfo once a subscriber matched.
+PUBLISHER_SCRIPT = f'''
+import sys, time
+sys.path.insert(0, {str(Path(__file__).parent)!r})
+import rclpy
+from rclpy.qos import QoSProfile, DurabilityPolicy
+from sensor_msgs.msg import CameraInfo
+from mvpose_msgs.msg import Skeleton
+from samples import sample_skeleton
+rclpy.init()
+node = rclpy.create_node('test_publisher')
+skeletons = node.create_publisher(Skeleton, {SKELETON_TOPIC!r}, 10)
+infos = node.create_publisher(CameraInfo, {CAMERA_INFO_TOPIC!r}, QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL))
+deadline = time.monotonic() + 20
+while (skeletons.get_subscription_count() < 1 or infos.get_subscription_count() < 1) and time.monotonic() < deadline:
+    time.sleep(0.05)
+infos.publish(CameraInfo(width=1920, height=1080, distortion_model='plumb_bob'))
+for seed in range({FRAMES}):
+    skeletons.publish(sample_skeleton(seed, stamp_ns=1_700_000_000_000_000_000 + seed * 40_000_000))
+    time.sleep(0.04)
+from rclpy.duration import Duration
+skeletons.wait_for_all_acked(Duration(seconds=5))
+infos.wait_for_all_acked(Duration(seconds=5))
+'''
+
+
+@pytest.fixture(scope='module')
+def recorded_bag(tmp_path_factory):
+    """A bag recorded live by `bag record` from another process's publications."""
+    bag = tmp_path_factory.mktemp('bags') / 'recorded'
+    script = tmp_path_factory.mktemp('scripts') / 'publish.py'
+    script.write_text(PUBLISHER_SCRIPT)
+    recorder = Background('bag', 'record', '--topics', SKELETON_TOPIC, CAMERA_INFO_TOPIC, '-o', bag)
+    try:
+        recorder.wait_for_stderr_line('writing')
+        run_mvpose('exec', 'python', script, timeout=60)
+        code, _, err = recorder.interrupt()
+    finally:
+        recorder.kill()
+    assert code == 0, err
+    return bag
+
+
+def echoed_skeletons(stdout):
+    """The Skeletons a `topic echo` printed, rebuilt as messages."""
+    documents = [d for d in yaml.safe_load_all(stdout) if d]
+    return [set_message_fields(Skeleton(), d) for d in documents]
+
+
+def test_record_play_echo_round_trip(recorded_bag, background):
+    echo = background('topic', 'echo', SKELETON_TOPIC, SKELETON_TYPE, '--count', FRAMES, '--timeout', 60)
+    run_mvpose('bag', 'play', recorded_bag, '--topics', SKELETON_TOPIC, *WAIT)
+    code, out, err = echo.finish(timeout=60)
+    assert code == 0, err
+    assert echoed_skeletons(out) == [sample_skeleton(seed, 1_700_000_000_000_000_000 + seed * 40_000_000)
+                                     for seed in range(FRAMES)]
+
+
+def test_recorded_bag_conforms_for_rosbags(recorded_bag):
+    expected = [sample_skeleton(seed, 1_700_000_000_000_000_000 + seed * 40_000_000) for seed in range(FRAMES)]
+    with AnyReader([recorded_bag]) as reader:
+        types = {c.topic: c.msgtype for c in reader.connections}
+        assert types == {SKELETON_TOPIC: SKELETON_TYPE, CAMERA_INFO_TOPIC: 'sensor_msgs/msg/CameraInfo'}
+        counts = {c.topic: c.msgcount for c in reader.connections}
+        assert counts == {SKELETON_TOPIC: FRAMES, CAMERA_INFO_TOPIC: 1}
+        skeletons = [reader.deserialize(raw, c.msgtype) for c, _, raw in reader.messages()
+                     if c.topic == SKELETON_TOPIC]
+    for got, want in zip(skeletons, expected):
+        assert list(got.joint_names) == list(want.joint_names)
+        assert [(p.position.x, p.position.y, p.position.z, p.orientation.w) for p in got.joints] == \
+               [(p.position.x, p.position.y, p.position.z, p.orientation.w) for p in want.joints]
+        assert got.parameters.tolist() == list(want.parameters)
+        assert [(s.name, s.cost, s.evaluations, list(s.cameras), s.fitted) for s in got.stages] == \
+               [(s.name, s.cost, s.evaluations, list(s.cameras), s.fitted) for s in want.stages]
+        assert (got.header.stamp.sec, got.header.stamp.nanosec, got.status, got.fit_time) == \
+               (want.header.stamp.sec, want.header.stamp.nanosec, want.status, want.fit_time)
+
+
+def test_recorded_metadata_is_rosbag2(recorded_bag):
+    metadata = yaml.safe_load((recorded_bag / 'metadata.yaml').read_text())['rosbag2_bagfile_information']
+    assert metadata['version'] == 9 and metadata['storage_identifier'] == 'mcap'
+    assert metadata['message_count'] == FRAMES + 1
+    topics = {t['topic_metadata']['name']: t for t in metadata['topics_with_message_count']}
+    assert topics[CAMERA_INFO_TOPIC]['topic_metadata']['offered_qos_profiles'][0]['durability'] == 'transient_local'
+    assert topics[SKELETON_TOPIC]['topic_metadata']['type_description_hash'].startswith('RIHS01_')
+    assert (recorded_bag / metadata['relative_file_paths'][0]).is_file()
+
+
+def test_bag_info(recorded_bag):
+    out = run_mvpose('bag', 'info', recorded_bag).stdout
+    assert f'Messages:          {FRAMES + 1}' in out
+    rows = {line.split('|')[0].split()[-1]: [cell.strip() for cell in line.split('|')[1:]]
+            for line in out.splitlines() if line.strip().startswith('Topic:')}
+    assert rows[SKELETON_TOPIC] == [f'Type: {SKELETON_TYPE}', f'Count: {FRAMES}', 'Serialization Format: cdr']
+    assert rows[CAMERA_INFO_TOPIC][:2] == ['Type: sensor_msgs/msg/CameraInfo', 'Count: 1']
+
+
+def receive_during_play(topics, play_args, stop_after=None):
+    """Subscribe in this process to `topics`, run `bag play ARGS`, return {topic: [messages]}.
+
+    With `stop_after` = (topic, n), the player is interrupted once n messages arrived on topic
+    (for --loop, which never ends by itself)."""
+    import subprocess
+    import rclpy
+    node = rclpy.create_node('test_receiver')
+    received = {topic: [] for topic in topics}
+    for topic in topics:
+        node.create_subscription(message_class_of(topic), topic, received[topic].append, 100)
+    player = Background('bag', 'play', *play_args)
+    try:
+        deadline = time.monotonic() + 60
+        while player.process.poll() is None and time.monotonic() < deadline:
+            rclpy.spin_once(node, timeout_sec=0.05)
+            if stop_after and len(received[stop_after[0]]) >= stop_after[1]:
+                player.interrupt()
+        for _ in range(10):
+            rclpy.spin_once(node, timeout_sec=0.05)
+        code, _, err = player.finish()
+        assert code == 0 or (stop_after and code == 130), err
+    except subprocess.TimeoutExpired:
+        raise AssertionError(f'bag play {play_args} did not end')
+    finally:
+        player.kill()
+        node.destroy_node()
+    return received
+
+
+def message_class_of(topic):
+    return {SKELETON_TOPIC: Skeleton, CAMERA_INFO_TOPIC: CameraInfo, '/clock': Clock}[topic]
+
+
+def test_bare_mcap_plays(recorded_bag, ros_context):
+    mcap_file = next(recorded_bag.glob('*.mcap'))
+    received = receive_during_play([SKELETON_TOPIC], [mcap_file, *WAIT, '--topics', SKELETON_TOPIC])
+    assert [m.status_message for m in received[SKELETON_TOPIC]] == [f'sample {seed}' for seed in range(FRAMES)]
+
+
+def test_play_start_offset_and_topics(recorded_bag, ros_context):
+    bag = BagReader(recorded_bag)
+    skeleton_times = [t for _, t, _ in bag.messages(topics=[SKELETON_TOPIC])]
+    offset = (skeleton_times[2] - bag.start_ns) / 1e9 - 0.001  # just before the third skeleton
+    received = receive_during_play([SKELETON_TOPIC, CAMERA_INFO_TOPIC],
+                                   [recorded_bag, *WAIT, '--topics', SKELETON_TOPIC, '--start-offset', offset])
+    assert [m.status_message for m in received[SKELETON_TOPIC]] == [f'sample {s}' for s in range(2, FRAMES)]
+    assert received[CAMERA_INFO_TOPIC] == []
+
+
+def test_play_loop_starts_again(recorded_bag, ros_context):
+    received = receive_during_play([SKELETON_TOPIC],
+                                   [recorded_bag, *WAIT, '--loop', '--topics', SKELETON_TOPIC],
+                                   stop_after=(SKELETON_TOPIC, 2 * FRAMES))
+    names = [m.status_message for m in received[SKELETON_TOPIC]]
+    assert names[:2 * FRAMES] == [f'sample {s}' for s in range(FRAMES)] * 2
+
+
+def test_late_subscriber_gets_calibration(recorded_bag, background, ros_context):
+    """camera_info is latched on playback: a subscriber that starts after it was played still gets it."""
+    player = background('bag', 'play', recorded_bag, '--topics', CAMERA_INFO_TOPIC, SKELETON_TOPIC,
+                        '--loop', '--rate', 0.05)
+    time.sleep(3.0)  # the CameraInfo (first message) has been published by now, to nobody
+    echo = run_mvpose('topic', 'echo', CAMERA_INFO_TOPIC, '--once', '--field', 'width', '--timeout', 30)
+    assert echo.stdout.strip().splitlines()[0] == '1920'
+    player.interrupt()
+
+
+def test_play_publishes_clock(recorded_bag, ros_context):
+    received = receive_during_play(['/clock', SKELETON_TOPIC],
+                                   [recorded_bag, *WAIT, '--topics', SKELETON_TOPIC, '--clock', 100])
+    stamps = [m.clock.sec * 10**9 + m.clock.nanosec for m in received['/clock']]
+    assert len(stamps) >= 3 and stamps == sorted(stamps)
+    bag = BagReader(recorded_bag)
+    assert bag.start_ns <= stamps[0] and stamps[-1] <= bag.end_ns
+
+
+# ---- bad input: one line, non-zero exit, no traceback ------------------------------------------
+
+def test_truncated_mcap_is_one_line_error(recorded_bag, tmp_path):
+    data = next(recorded_bag.glob('*.mcap')).read_bytes()
+    truncated = tmp_path / 'truncated.mcap'
+    truncated.write_bytes(data[:len(data) // 2])
+    for verb in ('info', 'play'):
+        assert_one_line_error(run_mvpose('bag', verb, truncated, check=False), str(truncated), 'truncated')
+
+
+def test_non_mcap_file_is_one_line_error(tmp_path):
+    text_file = tmp_path / 'notes.mcap'
+    text_file.write_text('not a bag\n')
+    for verb in ('info', 'play'):
+        assert_one_line_error(run_mvpose('bag', verb, text_file, check=False), str(text_file), 'not an MCAP file')
+
+
+def test_missing_bag_is_one_line_error(tmp_path):
+    for verb in ('info', 'play'):
+        assert_one_line_error(run_mvpose('bag', verb, tmp_path / 'nowhere', check=False), 'no such file')
+
+
+def test_unknown_subcommands_are_one_line_errors():
+    assert_one_line_error(run_mvpose('frobnicate', check=False), "invalid choice: 'frobnicate'")
+    assert_one_line_error(run_mvpose('bag', 'frobnicate', check=False), "invalid choice: 'frobnicate'")
+    assert_one_line_error(run_mvpose('topic', 'frobnicate', check=False), "invalid choice: 'frobnicate'")
+
+
+def test_unknown_topic_type_is_one_line_error(tmp_path):
+    from mcap.writer import Writer
+    bag = tmp_path / 'foreign.mcap'
+    with open(bag, 'wb') as stream:
+        writer = Writer(stream)
+        writer.start(profile='ros2', library='test')
+        schema = writer.register_schema(name='nonexistent_msgs/msg/Thing', encoding='ros2msg', data=b'int32 a\n')
+        channel = writer.register_channel(topic='/thing', message_encoding='cdr', schema_id=schema)
+        writer.add_message(channel_id=channel, log_time=1, publish_time=1, data=b'\x00\x01\x00\x00\x07\x00\x00\x00')
+        writer.finish()
+    assert_one_line_error(run_mvpose('bag', 'play', bag, check=False), 'nonexistent_msgs/msg/Thing')
+    info = run_mvpose('bag', 'info', bag)  # info needs no type support: it still describes the bag
+    assert 'Type: nonexistent_msgs/msg/Thing | Count: 1' in info.stdout
+    assert_one_line_error(run_mvpose('topic', 'echo', '/thing', 'nonexistent_msgs/msg/Thing', check=False),
+                          'nonexistent_msgs')
+
+
+def test_unknown_topic_in_bag_is_one_line_error(recorded_bag):
+    assert_one_line_error(run_mvpose('bag', 'play', recorded_bag, '--topics', '/nope', check=False), '/nope')
+
+
+def test_record_refuses_existing_output(recorded_bag):
+    assert_one_line_error(run_mvpose('bag', 'record', '--all', '-o', recorded_bag, check=False), 'already exists')
