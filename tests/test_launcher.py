@@ -91,27 +91,31 @@ def test_dry_run_prints_the_ros_command_line_of_an_executable_entry(tmp_path, ca
     marker = tmp_path / 'started'
     path = write_launch_file(tmp_path, f'''
 nodes:
-  - name: cam3_features
+  - name: camera_features
     executable: bag
     package: mvpose_nodes
     namespace: /cam3
     parameters: [config/features.yaml, {{cameras: [3, 5, 7], overlay: false, label: 'true'}}]
     remappings: {{from: to}}
     arguments: [--verbose, 3, true]
+  - name: camera_features
+    executable: bag
+    namespace: /cam5
   - name: player
     cmd: [{sys.executable}, -c, "open('{marker}', 'w')", bags/x]
 ''')
     assert main([str(path), '--dry-run']) == 0
     lines = capsys.readouterr().out.splitlines()
-    assert len(lines) == 2
-    assert lines[0].startswith('[cam3_features] ')
-    command = shlex.split(lines[0].removeprefix('[cam3_features] '))
+    assert len(lines) == 3
+    assert lines[0].startswith('[/cam3/camera_features] ')  # one node name, told apart by namespace
+    assert lines[1].startswith('[/cam5/camera_features] ')
+    command = shlex.split(lines[0].removeprefix('[/cam3/camera_features] '))
     assert command[0].endswith('/lib/mvpose_nodes/bag')
-    assert command[1:] == ['--verbose', '3', 'true', '--ros-args', '-r', '__node:=cam3_features', '-r', '__ns:=/cam3',
+    assert command[1:] == ['--verbose', '3', 'true', '--ros-args', '-r', '__node:=camera_features', '-r', '__ns:=/cam3',
                            '--params-file', str(tmp_path / 'config' / 'features.yaml'),
                            '-p', 'cameras:=[3, 5, 7]', '-p', 'overlay:=false', '-p', "label:='true'",
                            '-r', 'from:=to']
-    assert shlex.split(lines[1]) == ['[player]', sys.executable, '-c', f"open('{marker}', 'w')", 'bags/x']
+    assert shlex.split(lines[2]) == ['[player]', sys.executable, '-c', f"open('{marker}', 'w')", 'bags/x']
     assert not marker.exists()
 
 

@@ -7,7 +7,7 @@ ros_ws/install, sources ros_ws/install/local_setup.bash and then runs
 routes to them, so `./mvpose bag play X` and `ros2 run mvpose_nodes bag play X`
 behave the same.
 """
-import argparse
+import importlib
 import os
 import shutil
 import sys
@@ -36,57 +36,58 @@ def repository_root():
 
 
 def build_parser():
+    """The top-level parser: its help, and one-line errors for unknown commands. The commands
+    themselves take the rest of the command line as it is (see main)."""
     parser = ArgumentParser(
-        prog='./mvpose',
+        prog='./mvpose', keep_ros_args=True,  # `run` passes them on
         description='mvpose: markerless multi-camera 3D human motion capture on ROS 2 Jazzy. '
                     'Every call first makes sure .venv and ros_ws are set up (cheap when nothing changed).')
     commands = parser.add_subparsers(dest='command', metavar='COMMAND', required=True)
     for name, (_, summary) in ROUTED_TOOLS.items():
-        routed = commands.add_parser(name, help=summary, add_help=False)
-        routed.add_argument('args', nargs=argparse.REMAINDER)
-    test = commands.add_parser('test', help='run the test suite (pytest; extra arguments go to pytest)',
-                               add_help=False)
-    test.add_argument('args', nargs=argparse.REMAINDER)
+        commands.add_parser(name, help=summary)
+    commands.add_parser('test', help='run the test suite (pytest; extra arguments go to pytest, e.g. -k bag)')
     run = commands.add_parser('run', help='run a node or tool of mvpose_nodes, like `ros2 run mvpose_nodes`',
                               description='Run EXECUTABLE of mvpose_nodes with the rest of the command line, '
                                           'e.g. ./mvpose run camera_features --ros-args -r __ns:=/cam3')
     run.add_argument('executable')
-    run.add_argument('args', nargs=argparse.REMAINDER, help='arguments for the executable (e.g. --ros-args ...)')
+    run.add_argument('args', nargs='*', help='arguments for the executable (e.g. --ros-args ...)')
     execute = commands.add_parser('exec', help='run any command inside the built environment',
                                   description='Run CMD with .venv and ros_ws/install on the environment, '
                                               'e.g. ./mvpose exec python -c "import rclpy"')
-    execute.add_argument('cmd', nargs=argparse.REMAINDER, metavar='CMD')
-    return parser
+    execute.add_argument('cmd', nargs='+', metavar='CMD')
+    return parser, commands.choices
 
 
 def main(argv=None):
     argv = sys.argv[1:] if argv is None else argv
-    parser = build_parser()
-    args = parser.parse_args(argv)
-    with exit_on_user_error(f'./mvpose {args.command}'):
-        if args.command in ROUTED_TOOLS:
-            module = __import__(ROUTED_TOOLS[args.command][0], fromlist=['main'])
-            return module.main(args.args, prog=f'./mvpose {args.command}')
-        if args.command == 'test':
-            root = repository_root()
-            os.chdir(root)
+    parser, commands = build_parser()
+    if not argv or argv[0] not in commands:
+        parser.parse_args(argv)  # prints the help, or a one-line error naming the unknown command
+    command, rest = argv[0], argv[1:]
+    asks_help = rest[:1] in (['-h'], ['--help'])
+    with exit_on_user_error(f'./mvpose {command}'):
+        if command in ROUTED_TOOLS:
+            module = importlib.import_module(ROUTED_TOOLS[command][0])
+            return module.main(rest, prog=f'./mvpose {command}')
+        if command == 'test':
+            os.chdir(repository_root())
             # The whole suite unless the user names tests (paths or node ids) to run.
-            names_tests = any(not a.startswith('-') and (os.path.exists(a.split('::')[0])) for a in args.args)
-            command = [sys.executable, '-m', 'pytest', *([] if names_tests else ['tests']), *args.args]
-            os.execv(sys.executable, command)
-        if args.command == 'run':
-            path = package_executable(PACKAGE, args.executable)
+            names_tests = any(not a.startswith('-') and os.path.exists(a.split('::')[0]) for a in rest)
+            command_line = [sys.executable, '-m', 'pytest', *([] if names_tests else ['tests']), *rest]
+            os.execv(sys.executable, command_line)
+        if not rest or asks_help:
+            commands[command].parse_args(rest)  # help, or the one-line error for the missing argument
+        if command == 'run':
+            path = package_executable(PACKAGE, rest[0])
             if path is None:
                 known = sorted(p.name for prefix in filter(None, os.environ.get('AMENT_PREFIX_PATH', '').split(os.pathsep))
                                for p in Path(prefix, 'lib', PACKAGE).glob('*') if os.access(p, os.X_OK))
-                raise UserError(f"no executable '{args.executable}' in package {PACKAGE} (it has: {', '.join(known)})")
-            os.execv(path, [str(path), *args.args])
-        if args.command == 'exec':
-            if not args.cmd:
-                raise UserError('exec needs a command, e.g. ./mvpose exec python -c "import rclpy"')
-            if shutil.which(args.cmd[0]) is None:
-                raise UserError(f"command not found: '{args.cmd[0]}'")
-            os.execvp(args.cmd[0], args.cmd)
+                raise UserError(f"no executable '{rest[0]}' in package {PACKAGE} (it has: {', '.join(known)})")
+            os.execv(path, [str(path), *rest[1:]])
+        if command == 'exec':
+            if shutil.which(rest[0]) is None:
+                raise UserError(f"command not found: '{rest[0]}'")
+            os.execvp(rest[0], rest)
     return 0
 
 

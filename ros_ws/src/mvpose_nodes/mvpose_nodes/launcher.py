@@ -3,7 +3,7 @@
 Run as `./mvpose launch FILE.yaml` (or the `launch` executable). The file lists the processes to start:
 
   nodes:
-    - name: cam3_features          # required, unique: the node name and the prefix of its output lines
+    - name: camera_features        # required: the node name; namespace/name is unique and prefixes its output
       executable: camera_features  # a console script of `package` (PREFIX/lib/PACKAGE/NAME, as `ros2 run`)
       package: mvpose_nodes        # optional, default mvpose_nodes
       namespace: /cam3             # optional
@@ -164,6 +164,7 @@ def _process_spec(entry, base_dir):
         if not isinstance(namespace, str) or not namespace.startswith('/'):
             raise UserError("'namespace' must start with '/', e.g. /cam3")
         command += ['-r', f'__ns:={namespace}']
+        name = f"{namespace.rstrip('/')}/{name}"  # the node's full name: unique where the plain name need not be
     command += _parameter_arguments(entry.get('parameters', []), base_dir)
     remappings = entry.get('remappings', {})
     if not isinstance(remappings, dict):

@@ -1,0 +1,95 @@
+"""Messages between separate processes over DDS (loopback only), through rclpy and the topic tools."""
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import rclpy
+import yaml
+from conftest import Background, assert_one_line_error, run_mvpose
+from mvpose_msgs.msg import Skeleton
+from samples import sample_skeleton
+
+from mvpose_nodes.msgdict import message_to_yaml, set_message_fields
+
+TOPIC = '/test/dds_skeleton'
+
+PUBLISHER_SCRIPT = f'''
+import sys, time
+sys.path.insert(0, {str(Path(__file__).parent)!r})
+import rclpy
+from rclpy.duration import Duration
+from mvpose_msgs.msg import Skeleton
+from samples import sample_skeleton
+rclpy.init()
+node = rclpy.create_node('dds_test_publisher')
+publisher = node.create_publisher(Skeleton, {TOPIC!r}, 10)
+deadline = time.monotonic() + 30
+while publisher.get_subscription_count() < 1 and time.monotonic() < deadline:
+    time.sleep(0.05)
+time.sleep(0.3)
+for seed in (11, 12, 13):
+    publisher.publish(sample_skeleton(seed))
+publisher.wait_for_all_acked(Duration(seconds=5))
+'''
+
+
+def spin_until(node, condition, timeout):
+    deadline = time.monotonic() + timeout
+    while not condition() and time.monotonic() < deadline:
+        rclpy.spin_once(node, timeout_sec=0.05)
+
+
+def test_skeleton_from_another_process_arrives_intact(tmp_path, ros_context):
+    script = tmp_path / 'publish.py'
+    script.write_text(PUBLISHER_SCRIPT)
+    node = rclpy.create_node('dds_test_subscriber')
+    received = []
+    node.create_subscription(Skeleton, TOPIC, received.append, 10)
+    publisher = subprocess.Popen([sys.executable, script], stderr=subprocess.PIPE, text=True)
+    try:
+        spin_until(node, lambda: len(received) == 3, timeout=60)
+        assert publisher.wait(timeout=30) == 0, publisher.stderr.read()
+    finally:
+        publisher.kill()
+        node.destroy_node()
+    assert received == [sample_skeleton(seed) for seed in (11, 12, 13)]
+
+
+def test_topic_pub_to_topic_echo(background):
+    sent = sample_skeleton(21)
+    echo = background('topic', 'echo', TOPIC, '--once', '--timeout', 60)
+    run_mvpose('topic', 'pub', TOPIC, 'mvpose_msgs/msg/Skeleton', message_to_yaml(sent, flow_style=True), '--once')
+    code, out, err = echo.finish(timeout=60)
+    assert code == 0, err
+    assert set_message_fields(Skeleton(), yaml.safe_load(out.split('\n---')[0])) == sent
+
+
+def test_echo_field_and_csv(background):
+    sent = sample_skeleton(22)
+    field = background('topic', 'echo', TOPIC, '--once', '--field', 'joints.8.position', '--timeout', 60)
+    csv = background('topic', 'echo', TOPIC, '--once', '--field', 'stages.0', '--csv', '--timeout', 60)
+    run_mvpose('topic', 'pub', TOPIC, 'mvpose_msgs/msg/Skeleton', message_to_yaml(sent, flow_style=True),
+               '--once', '-w', 2)
+    code, out, err = field.finish(timeout=60)
+    head = sent.joints[8].position
+    assert code == 0 and yaml.safe_load(out.split('\n---')[0]) == {'x': head.x, 'y': head.y, 'z': head.z}, err
+    code, out, err = csv.finish(timeout=60)
+    stage = sent.stages[0]
+    assert code == 0, err
+    assert out.splitlines()[0] == f'{stage.name},{stage.cost!r},{stage.evaluations},3,5,7,{stage.fitted}'
+
+
+def test_topic_list_shows_types_and_hz_measures(background):
+    publisher = background('topic', 'pub', '/test/ticks', 'std_msgs/msg/String', '{data: tick}', '--rate', 20)
+    listing = run_mvpose('topic', 'list', '-t', '--spin-time', 3).stdout
+    assert '/test/ticks [std_msgs/msg/String]' in listing.splitlines()
+    hz = run_mvpose('topic', 'hz', '/test/ticks', '--duration', 4, timeout=60).stdout
+    rates = [float(line.split(':')[1]) for line in hz.splitlines() if line.startswith('average rate:')]
+    assert rates and all(rate > 0 for rate in rates), hz
+    publisher.interrupt()
+
+
+def test_echo_without_publisher_times_out_cleanly():
+    result = run_mvpose('topic', 'echo', '/test/nobody', '--timeout', 1, check=False)
+    assert_one_line_error(result, '/test/nobody')
