@@ -50,6 +50,10 @@ def test_front_door_errors_are_one_line():
 
 
 def test_demo_replays_a_bag_and_shows_every_skeleton(tmp_path):
-    result = run_mvpose('demo', '--bag', tmp_path / 'demo', '--frames', 10, timeout=120)
+    bag = tmp_path / 'walk'
+    run_mvpose('synth', '--cameras', 3, 5, '--frames', '60-64', '--resolution', '320x180', '-o', bag, timeout=300)
+    result = run_mvpose('demo', '--bag', bag, '-o', tmp_path / 'pictures', timeout=120)
     frames = [line for line in result.stdout.splitlines() if line.startswith('[demo] frame')]
-    assert len(frames) == 10 and 'shown: 10 of 10 skeletons' in result.stdout
+    assert [int(line.split()[2]) for line in frames] == [60, 61, 62, 63, 64]
+    assert 'shown: 5 of 5 skeletons' in result.stdout
+    assert (tmp_path / 'pictures' / 'walk_preview.png').is_file()

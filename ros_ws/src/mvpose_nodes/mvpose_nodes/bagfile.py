@@ -85,14 +85,16 @@ class BagWriter:
         self._end_ns = None
 
     def add_topic(self, topic, type_name, offered_qos_profiles=(DEFAULT_QOS_PROFILE,)):
-        """Register a topic before writing its messages; a second call for it is a no-op."""
+        """Register a topic before writing its messages; a second call for it is a no-op. Missing keys
+        of the offered QoS profiles (dicts as in DEFAULT_QOS_PROFILE) take their default values."""
         if topic in self._topics:
             return
         type_name = full_type_name(type_name)
         if type_name not in self._schemas:
             self._schemas[type_name] = self._writer.register_schema(
                 name=type_name, encoding='ros2msg', data=schema_text(type_name).encode())
-        profiles = copy.deepcopy(list(offered_qos_profiles))  # no shared dicts: YAML would alias them
+        # Complete profiles (readers such as rosbags require every key); no shared dicts (YAML would alias them).
+        profiles = [copy.deepcopy({**DEFAULT_QOS_PROFILE, **profile}) for profile in offered_qos_profiles]
         self._channels[topic] = self._writer.register_channel(
             topic=topic, message_encoding=SERIALIZATION_FORMAT, schema_id=self._schemas[type_name],
             metadata={'offered_qos_profiles': dump_qos_profiles(profiles)})

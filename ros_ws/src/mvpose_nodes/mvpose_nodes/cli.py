@@ -24,6 +24,9 @@ ROUTED_TOOLS = {
     'topic': ('mvpose_nodes.topic_cli', 'echo, list, measure or publish live topics'),
     'launch': ('mvpose_nodes.launcher', 'start the nodes of a launch YAML file as separate processes'),
     'demo': ('mvpose_nodes.demo', 'replay a bag through the graph and show the skeleton (README command 1)'),
+    'synth': ('mvpose_nodes.synth_cli', 'make an i3DPost-like multi-camera bag with exact ground truth'),
+    'preview': ('mvpose_nodes.preview', 'contact sheet of every camera of a bag at one frame, skeleton drawn on'),
+    'import-i3dpost': ('mvpose_nodes.import_cli', 'turn i3DPost dataset frames and calibration into a bag'),
 }
 
 

@@ -1,117 +1,79 @@
-"""`./mvpose demo`: replay a skeleton bag over DDS and show what arrives, frame by frame.
+"""`./mvpose demo`: replay the synthetic i3DPost walk over DDS and show the skeleton that arrives.
 
-This is the foundation's demo: it proves the path bag -> `bag play` -> DDS -> subscriber with
-a small generated bag (`bags/demo_skeleton`: a procedurally swinging walk of the 15-joint
-skeleton). The full demo (camera bag through the feature and fitting nodes) replaces it when
-those nodes exist.
+Makes `bags/i3dpost_walk_synth` (cameras 3, 5, 7, frames 52–101, 1080p) when it is missing,
+plays it with `bag play`, prints a line per frame for each skeleton received on
+/mvpose/ground_truth, and draws the skeleton over all the bag's cameras at the first frame.
+The fitting nodes join this demo when they exist (the skeleton will then be /mvpose/skeleton).
 """
-import math
 import subprocess
 import sys
 import time
 from pathlib import Path
 
-import numpy as np
-
 from mvpose_nodes.body_model import JOINT_NAMES
 from mvpose_nodes.errors import ArgumentParser, exit_on_user_error
 
-SKELETON_TOPIC = '/mvpose/skeleton'
-FRAME_RATE = 25.0  # [Hz] i3DPost's
-START_NS = 1_700_000_000_000_000_000
-
-# A standing person facing +x (metres; z up, floor z = 0, left = +y), the joints of JOINT_NAMES.
-STANDING_POSE = {
-    'pelvis': (0.0, 0.0, 0.95), 'left_hip': (0.0, 0.09, 0.95), 'left_knee': (0.0, 0.10, 0.52),
-    'left_ankle': (0.0, 0.10, 0.08), 'right_hip': (0.0, -0.09, 0.95), 'right_knee': (0.0, -0.10, 0.52),
-    'right_ankle': (0.0, -0.10, 0.08), 'neck': (0.0, 0.0, 1.45), 'head': (0.0, 0.0, 1.72),
-    'left_shoulder': (0.0, 0.19, 1.43), 'left_elbow': (0.0, 0.21, 1.15), 'left_wrist': (0.0, 0.22, 0.90),
-    'right_shoulder': (0.0, -0.19, 1.43), 'right_elbow': (0.0, -0.21, 1.15), 'right_wrist': (0.0, -0.22, 0.90),
-}
-# Limbs that swing about their root joint while walking: (root, moved joints, phase sign).
-SWINGING_LIMBS = (('left_hip', ('left_knee', 'left_ankle'), 1), ('right_hip', ('right_knee', 'right_ankle'), -1),
-                  ('left_shoulder', ('left_elbow', 'left_wrist'), -1),
-                  ('right_shoulder', ('right_elbow', 'right_wrist'), 1))
-WALK_SPEED = 1.2  # [m/s]
-STRIDE_FREQUENCY = 0.9  # [Hz]
-SWING_AMPLITUDE = math.radians(20)
-
-
-def walking_pose(t):
-    """Joint positions [m] (15×3 float64, JOINT_NAMES order) of the demo walk at time t [s]."""
-    joints = {name: np.array(position) for name, position in STANDING_POSE.items()}
-    angle = SWING_AMPLITUDE * math.sin(2 * math.pi * STRIDE_FREQUENCY * t)
-    for root, moved, sign in SWINGING_LIMBS:
-        c, s = math.cos(sign * angle), math.sin(sign * angle)
-        rotation = np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])  # about the y axis (sideways)
-        for name in moved:
-            joints[name] = joints[root] + rotation @ (joints[name] - joints[root])
-    offset = np.array([WALK_SPEED * t - 2.0, 0.0, 0.0])
-    return np.array([joints[name] + offset for name in JOINT_NAMES])
-
-
-def skeleton_message(positions, stamp_ns):
-    from geometry_msgs.msg import Pose
-    from mvpose_msgs.msg import Skeleton
-    msg = Skeleton(joint_names=list(JOINT_NAMES), status=Skeleton.STATUS_OK)
-    msg.header.frame_id = 'world'
-    msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(stamp_ns, 10**9)
-    for position in positions:
-        pose = Pose()
-        pose.position.x, pose.position.y, pose.position.z = map(float, position)
-        pose.orientation.w = 1.0
-        msg.joints.append(pose)
-    return msg
-
-
-def write_demo_bag(path, frames):
-    from rclpy.serialization import serialize_message
-    from mvpose_nodes.bagfile import BagWriter
-    with BagWriter(path) as bag:
-        bag.add_topic(SKELETON_TOPIC, 'mvpose_msgs/msg/Skeleton')
-        for frame in range(frames):
-            stamp_ns = START_NS + int(frame * 1e9 / FRAME_RATE)
-            bag.write(SKELETON_TOPIC, serialize_message(skeleton_message(walking_pose(frame / FRAME_RATE), stamp_ns)),
-                      stamp_ns)
+DEMO_BAG = Path('bags/i3dpost_walk_synth')
+DEMO_SYNTH_ARGUMENTS = ('--cameras', '3', '5', '7', '--frames', '52-101')
+OUTPUT = Path('output/demo')
 
 
 def main(argv=None, prog='demo'):
-    parser = ArgumentParser(prog=prog, description=__doc__.splitlines()[0])
-    parser.add_argument('--bag', type=Path, help='skeleton bag to replay (default: bags/demo_skeleton, made if missing)')
-    parser.add_argument('--frames', type=int, default=100, help='frames of a newly made demo bag (default 100)')
+    parser = ArgumentParser(prog=prog, description=__doc__.split('\n\n')[0])
+    parser.add_argument('--bag', type=Path, help=f'camera bag to replay (default {DEMO_BAG}, made if missing)')
+    parser.add_argument('-o', '--output', type=Path, help=f'folder for the pictures (default {OUTPUT})')
     args = parser.parse_args(sys.argv[1:] if argv is None else argv)
     with exit_on_user_error(prog):
         from mvpose_nodes.cli import repository_root
-        bag = args.bag or repository_root() / 'bags' / 'demo_skeleton'
+        root = repository_root()
+        bag = args.bag or root / DEMO_BAG
         if not bag.exists():
-            print(f'[demo] making {bag} ({args.frames} frames at {FRAME_RATE:g} fps)', flush=True)
-            write_demo_bag(bag, args.frames)
-        return replay_and_show(bag)
+            print(f'[demo] making {bag} with `./mvpose synth {" ".join(DEMO_SYNTH_ARGUMENTS)}` (about a minute)',
+                  flush=True)
+            tool(['synth', *DEMO_SYNTH_ARGUMENTS, '-o', str(bag)])
+        output = args.output or root / OUTPUT
+        received = replay_and_show(bag)
+        sheet = output / f'{bag.name}_preview.png'
+        tool(['preview', str(bag), '-o', str(sheet)])
+        print(f'[demo] shown: {received[0]} of {received[1]} skeletons of {bag} crossed DDS from `bag play` to this '
+              f'viewer; the skeleton over every camera of the first frame is in {sheet}.')
+        return 0 if received[0] == received[1] else 1
+
+
+def tool(arguments):
+    """Run another ./mvpose subcommand in this environment; stop the demo if it fails."""
+    result = subprocess.run([sys.executable, '-m', 'mvpose_nodes.cli', *arguments])
+    if result.returncode != 0:
+        sys.exit(result.returncode)
 
 
 def replay_and_show(bag):
+    """Play `bag`, print every skeleton that arrives; (received, expected)."""
     import rclpy
     from mvpose_msgs.msg import Skeleton
     from mvpose_nodes.bagfile import BagReader
+    from mvpose_nodes.camera_bag import GROUND_TRUTH_TOPIC, frame_number_of
+    from mvpose_nodes.rosconv import joints_from_skeleton, stamp_ns
     from mvpose_nodes.rosutil import StopSignal
 
-    expected = BagReader(bag).topics[SKELETON_TOPIC].message_count
+    reader = BagReader(bag)
+    expected = reader.topics[GROUND_TRUTH_TOPIC].message_count if GROUND_TRUTH_TOPIC in reader.topics else 0
     head, pelvis = JOINT_NAMES.index('head'), JOINT_NAMES.index('pelvis')
     received = []
 
     def show(msg):
         received.append(msg)
-        t = (msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec - START_NS) / 1e9
-        p, h = msg.joints[pelvis].position, msg.joints[head].position
-        print(f'[demo] frame {len(received):3d}/{expected}  t={t:5.2f} s  pelvis=({p.x:+.2f}, {p.y:+.2f}, {p.z:.2f}) m'
-              f'  head z={h.z:.2f} m', flush=True)
+        joints = joints_from_skeleton(msg)
+        p = joints[pelvis]
+        print(f'[demo] frame {frame_number_of(stamp_ns(msg.header)):4d}  ({len(received):2d}/{expected})  '
+              f'pelvis=({p[0]:+.2f}, {p[1]:+.2f}, {p[2]:.2f}) m  head z={joints[head][2]:.2f} m', flush=True)
 
     with StopSignal() as stop:
         node = rclpy.create_node('mvpose_demo_viewer')
-        node.create_subscription(Skeleton, SKELETON_TOPIC, show, 100)
-        print(f'[demo] replaying {bag} with `bag play`; receiving {SKELETON_TOPIC} over DDS', flush=True)
+        node.create_subscription(Skeleton, GROUND_TRUTH_TOPIC, show, 100)
+        print(f'[demo] replaying {bag} ({", ".join(sorted(reader.topics))}) with `bag play`', flush=True)
         player = subprocess.Popen([sys.executable, '-m', 'mvpose_nodes.cli', 'bag', 'play', str(bag),
-                                   '--topics', SKELETON_TOPIC, '--wait-for-subscribers', '--delay', '0.3'])
+                                   '--topics', GROUND_TRUTH_TOPIC, '--wait-for-subscribers', '--delay', '0.3'])
         while player.poll() is None and not stop.stopped:
             rclpy.spin_once(node, timeout_sec=0.05)
         deadline = time.monotonic() + 1.0
@@ -120,6 +82,4 @@ def replay_and_show(bag):
         if player.poll() is None:
             player.terminate()
         node.destroy_node()
-    print(f'[demo] shown: {len(received)} of {expected} skeletons of {bag} crossed DDS from `bag play` to this '
-          'viewer (`./mvpose topic echo /mvpose/skeleton` shows the same while a bag plays).')
-    return 0 if len(received) == expected else 1
+    return len(received), expected

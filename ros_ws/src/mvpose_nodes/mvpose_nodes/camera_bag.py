@@ -1,0 +1,69 @@
+"""The multi-camera bag contract in code: topic names, frame stamps, and a writer that lays a bag
+out the way every node and tool expects it (calibration latched before the first image).
+
+Topics of camera K (i3DPost camera number 1..8):
+  /cam<K>/image_raw/compressed               sensor_msgs/CompressedImage (jpeg or png)
+  /cam<K>/camera_info, /cam<K>/camera_pose   sensor_msgs/CameraInfo, geometry_msgs/PoseStamped (latched)
+  /cam<K>/ground_truth/labels/compressed     synthetic bags: PNG mono8 label mask (LABEL_* | SKIN_BIT)
+and /mvpose/ground_truth (mvpose_msgs/Skeleton), once per frame in synthetic bags.
+Frame N of a sequence has the stamp FRAME_EPOCH_NS + N / FRAME_RATE.
+"""
+from rclpy.serialization import serialize_message
+
+from mvpose_nodes.bagfile import BagWriter
+from mvpose_nodes.rosconv import calibration_messages, skeleton_message
+
+FRAME_RATE = 25.0  # [Hz] i3DPost's
+FRAME_EPOCH_NS = 1_230_768_000_000_000_000  # stamp of frame 0 (2009-01-01, the year i3DPost was recorded)
+GROUND_TRUTH_TOPIC = '/mvpose/ground_truth'
+LATCHED_QOS = {'history': 'keep_last', 'depth': 1, 'reliability': 'reliable', 'durability': 'transient_local'}
+STREAM_QOS = {'history': 'keep_last', 'depth': 10, 'reliability': 'reliable', 'durability': 'volatile'}
+
+
+def frame_stamp_ns(frame_number):
+    return FRAME_EPOCH_NS + round(frame_number * 1e9 / FRAME_RATE)
+
+
+def frame_number_of(stamp_ns):
+    return round((stamp_ns - FRAME_EPOCH_NS) * FRAME_RATE / 1e9)
+
+
+def camera_topics(number):
+    """The bag contract's topics of camera `number`."""
+    base = f'/cam{number}'
+    return {'image': f'{base}/image_raw/compressed', 'info': f'{base}/camera_info', 'pose': f'{base}/camera_pose',
+            'labels': f'{base}/ground_truth/labels/compressed'}
+
+
+class CameraBagWriter:
+    """A BagWriter for frames of `cameras` (the calibration the bag states) starting at `first_frame`."""
+
+    def __init__(self, path, cameras, first_frame, ground_truth=False):
+        self.bag = BagWriter(path)
+        first_stamp = frame_stamp_ns(first_frame)
+        for camera in cameras:
+            topics = camera_topics(camera.number)
+            self.bag.add_topic(topics['info'], 'sensor_msgs/msg/CameraInfo', [LATCHED_QOS])
+            self.bag.add_topic(topics['pose'], 'geometry_msgs/msg/PoseStamped', [LATCHED_QOS])
+            self.bag.add_topic(topics['image'], 'sensor_msgs/msg/CompressedImage', [STREAM_QOS])
+            if ground_truth:
+                self.bag.add_topic(topics['labels'], 'sensor_msgs/msg/CompressedImage', [STREAM_QOS])
+            info, pose = calibration_messages(camera, first_stamp)
+            self.bag.write(topics['info'], serialize_message(info), first_stamp - 1_000_000)  # before any image
+            self.bag.write(topics['pose'], serialize_message(pose), first_stamp - 1_000_000)
+        if ground_truth:
+            self.bag.add_topic(GROUND_TRUTH_TOPIC, 'mvpose_msgs/msg/Skeleton', [STREAM_QOS])
+
+    def write_image(self, camera_number, frame_number, cdr, kind='image'):
+        """Store a serialised CompressedImage of camera `camera_number` ('image' or 'labels')."""
+        self.bag.write(camera_topics(camera_number)[kind], cdr, frame_stamp_ns(frame_number))
+
+    def write_ground_truth(self, frame_number, joints):
+        stamp = frame_stamp_ns(frame_number)
+        self.bag.write(GROUND_TRUTH_TOPIC, serialize_message(skeleton_message(joints, stamp)), stamp)
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.bag.close()

@@ -1,0 +1,73 @@
+"""Rotations as matrices and quaternions ([x, y, z, w], the ROS order), and paper 004's exact
+rotation between two bone vectors.
+
+All functions take and return float64 NumPy arrays; a leading batch axis is allowed where noted.
+"""
+import numpy as np
+
+PARALLEL_TOLERANCE = 1e-12  # |sin φ| below this: the two vectors are taken as parallel
+
+
+def normalize(vectors, axis=-1):
+    """Unit vectors along `axis` (zero vectors stay zero)."""
+    vectors = np.asarray(vectors, dtype=float)
+    norm = np.linalg.norm(vectors, axis=axis, keepdims=True)
+    return np.divide(vectors, norm, out=np.zeros_like(vectors), where=norm > 0)
+
+
+def quaternion_from_axis_angle(axis, angle):
+    """q = [sin(φ/2)·n, cos(φ/2)] for a unit axis n and angle φ [rad] (paper 004 Eq. 4)."""
+    half = 0.5 * np.asarray(angle, dtype=float)
+    return np.concatenate([np.sin(half)[..., None] * np.asarray(axis, dtype=float), np.cos(half)[..., None]], axis=-1)
+
+
+def rotation_between(r, r_prime):
+    """The quaternion of the smallest rotation taking direction r to direction r' (paper 004 Eq. 3–4):
+    axis n = nor(r × r'), cos φ = r·r' / (|r||r'|). Parallel vectors give the identity; anti-parallel
+    ones a half turn about an axis perpendicular to r. Shapes (3,) or (N, 3) -> (4,) or (N, 4)."""
+    r, r_prime = normalize(r), normalize(r_prime)
+    cross = np.cross(r, r_prime)
+    sin_phi = np.linalg.norm(cross, axis=-1)
+    cos_phi = np.clip(np.sum(r * r_prime, axis=-1), -1.0, 1.0)
+    phi = np.arctan2(sin_phi, cos_phi)
+    # Any axis perpendicular to r serves when r and r' are (anti-)parallel: take r × the least-aligned basis axis.
+    basis = np.eye(3)[np.argmin(np.abs(r), axis=-1)]
+    fallback = normalize(np.cross(r, basis))
+    axis = np.where((sin_phi > PARALLEL_TOLERANCE)[..., None], normalize(cross), fallback)
+    return quaternion_from_axis_angle(axis, phi)
+
+
+def matrix_from_quaternion(q):
+    """3×3 rotation matrix (or N×3×3) of unit quaternion(s) [x, y, z, w]."""
+    x, y, z, w = np.moveaxis(normalize(q), -1, 0)
+    return np.stack([
+        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], -1),
+        np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], -1),
+        np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], -1),
+    ], -2)
+
+
+def quaternion_from_matrix(matrix):
+    """Unit quaternion [x, y, z, w] (w >= 0) of a 3×3 rotation matrix (Shepperd's method, stable for all angles)."""
+    m = np.asarray(matrix, dtype=float)
+    trace = np.trace(m)
+    candidates = np.array([trace, m[0, 0], m[1, 1], m[2, 2]])
+    best = int(np.argmax(candidates))
+    if best == 0:
+        s = 2.0 * np.sqrt(1.0 + trace)
+        q = [(m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s, 0.25 * s]
+    else:
+        i = best - 1
+        j, k = (i + 1) % 3, (i + 2) % 3
+        s = 2.0 * np.sqrt(1.0 + m[i, i] - m[j, j] - m[k, k])
+        q = [0.0, 0.0, 0.0, (m[k, j] - m[j, k]) / s]
+        q[i] = 0.25 * s
+        q[j] = (m[j, i] + m[i, j]) / s
+        q[k] = (m[k, i] + m[i, k]) / s
+    q = np.array(q)
+    return q if q[3] >= 0 else -q
+
+
+def rotation_about(axis, angle):
+    """3×3 matrix of a rotation by `angle` [rad] about `axis` (Rodrigues)."""
+    return matrix_from_quaternion(quaternion_from_axis_angle(normalize(axis), angle))

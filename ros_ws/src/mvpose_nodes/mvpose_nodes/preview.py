@@ -1,0 +1,120 @@
+"""`preview BAG --frame N -o FILE.png`: every camera of a bag at one frame, in one picture, with the
+skeletons projected on (like paper 000's Fig. 10): the ground truth (white) and, where the bag has
+it, the fitted /mvpose/skeleton (left side green, right side orange, centre yellow)."""
+import math
+import re
+import sys
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from mvpose_nodes.body_model import BONES, JOINT_NAMES
+from mvpose_nodes.camera_bag import GROUND_TRUTH_TOPIC, frame_number_of, frame_stamp_ns
+from mvpose_nodes.errors import ArgumentParser, UserError, exit_on_user_error
+
+IMAGE_TOPIC = re.compile(r'^/cam(\d+)/image_raw(/compressed)?$')
+TILE_WIDTH = 640  # [px] of each camera's tile in the sheet
+FITTED_TOPIC = '/mvpose/skeleton'
+INDEX = {name: i for i, name in enumerate(JOINT_NAMES)}
+COLOURS = {'left': (60, 220, 60), 'right': (255, 140, 30), 'centre': (250, 230, 40), 'truth': (255, 255, 255)}
+
+
+def build_parser(prog):
+    parser = ArgumentParser(prog=prog, description=__doc__.split('\n\n')[0].replace('\n', ' '))
+    parser.add_argument('bag', type=Path, help='bag directory or .mcap file')
+    parser.add_argument('--frame', type=int, help='frame number (default: the first frame of the bag)')
+    parser.add_argument('-o', '--output', type=Path, help='PNG to write (default: <bag name>_frame<N>.png)')
+    return parser
+
+
+def main(argv=None, prog='preview'):
+    args = build_parser(prog).parse_args(sys.argv[1:] if argv is None else argv)
+    with exit_on_user_error(prog):
+        frame, sheet = contact_sheet(args.bag, args.frame)
+        output = args.output or Path(f'{args.bag.name}_frame{frame}.png')
+        if output.suffix.lower() != '.png':
+            raise UserError(f"-o {output}: the contact sheet is a PNG file (name it .png)")
+        output.parent.mkdir(parents=True, exist_ok=True)
+        cv2.imwrite(str(output), cv2.cvtColor(sheet, cv2.COLOR_RGB2BGR))
+        print(f'[preview] wrote {output} ({sheet.shape[1]}×{sheet.shape[0]}, frame {frame})', file=sys.stderr)
+    return 0
+
+
+def frame_contents(bag_path, frame):
+    """{camera number: (Camera, RGB image)} and {topic: joints (15, 3)} of one frame of a bag."""
+    from rclpy.serialization import deserialize_message
+    from mvpose_nodes.bagfile import BagReader
+    from mvpose_nodes.interfaces import message_class
+    from mvpose_nodes.rosconv import (camera_from_messages, image_from_compressed, image_from_raw,
+                                      joints_from_skeleton, stamp_ns)
+
+    bag = BagReader(bag_path)
+    cameras = sorted({int(m[1]) for t in bag.topics if (m := IMAGE_TOPIC.match(t))})
+    if not cameras:
+        raise UserError(f"bag '{bag_path}' has no /cam<K>/image_raw[/compressed] topic")
+    if frame is None:
+        frame = frame_number_of(bag.start_ns) if bag.start_ns >= frame_stamp_ns(0) else 0
+    wanted = frame_stamp_ns(frame)
+    calibration, images, skeletons = {}, {}, {}
+    for info, log_time, data in bag.messages():
+        message = deserialize_message(data, message_class(info.type))
+        if info.name.endswith(('/camera_info', '/camera_pose')):
+            calibration.setdefault(info.name, message)
+        elif hasattr(message, 'header') and stamp_ns(message.header) == wanted:
+            if (match := IMAGE_TOPIC.match(info.name)):
+                images[int(match[1])] = image_from_compressed(message) if match[2] else image_from_raw(message)
+            elif info.name in (FITTED_TOPIC, GROUND_TRUTH_TOPIC):
+                skeletons[info.name] = joints_from_skeleton(message)
+        if log_time > wanted + 10**9:
+            break
+    if not images:
+        raise UserError(f"bag '{bag_path}' has no image at frame {frame} (its frames: "
+                        f'{frame_number_of(bag.start_ns)}–{frame_number_of(bag.end_ns)})')
+    views = {}
+    for number, image in images.items():
+        info, pose = calibration.get(f'/cam{number}/camera_info'), calibration.get(f'/cam{number}/camera_pose')
+        if info is None or pose is None:
+            raise UserError(f"bag '{bag_path}': camera {number} has no camera_info or camera_pose")
+        views[number] = (camera_from_messages(number, info, pose), image)
+    return frame, views, skeletons
+
+
+def draw_skeleton(image, camera, joints, truth):
+    """Draw the 14 bones and 15 joints of `joints` (15, 3) [m] projected by `camera` onto `image`."""
+    pixels, depth = camera.project(joints)
+    thickness = max(2, image.shape[1] // 400)
+    for parent, child in BONES:
+        a, b = INDEX[parent], INDEX[child]
+        if depth[a] <= 0 or depth[b] <= 0:
+            continue
+        side = 'truth' if truth else next((s for s in ('left', 'right') if child.startswith(s)), 'centre')
+        cv2.line(image, tuple(np.round(pixels[a]).astype(int)), tuple(np.round(pixels[b]).astype(int)),
+                 COLOURS[side], thickness, cv2.LINE_AA)
+    for pixel, z in zip(pixels, depth):
+        if z > 0:
+            cv2.circle(image, tuple(np.round(pixel).astype(int)), thickness + 2,
+                       COLOURS['truth'] if truth else (40, 40, 40), -1, cv2.LINE_AA)
+
+
+def contact_sheet(bag_path, frame):
+    """(frame, RGB uint8 sheet): every camera's image at `frame` with the skeletons drawn, in a grid."""
+    frame, views, skeletons = frame_contents(bag_path, frame)
+    tiles = []
+    for number, (camera, image) in sorted(views.items()):
+        canvas = image.copy()
+        for topic, joints in sorted(skeletons.items()):
+            draw_skeleton(canvas, camera, joints, truth=topic == GROUND_TRUTH_TOPIC)
+        tile = cv2.resize(canvas, (TILE_WIDTH, round(TILE_WIDTH * image.shape[0] / image.shape[1])),
+                          interpolation=cv2.INTER_AREA)
+        cv2.putText(tile, f'cam{number}  frame {frame}', (12, 30), cv2.FONT_HERSHEY_SIMPLEX, 0.8, (255, 255, 255), 2,
+                    cv2.LINE_AA)
+        tiles.append(tile)
+    columns = min(4, len(tiles))
+    rows = math.ceil(len(tiles) / columns)
+    height = max(t.shape[0] for t in tiles)
+    sheet = np.zeros((rows * height, columns * TILE_WIDTH, 3), np.uint8)
+    for i, tile in enumerate(tiles):
+        r, c = divmod(i, columns)
+        sheet[r * height:r * height + tile.shape[0], c * TILE_WIDTH:(c + 1) * TILE_WIDTH] = tile
+    return frame, sheet

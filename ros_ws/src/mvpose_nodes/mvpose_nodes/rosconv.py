@@ -1,0 +1,137 @@
+"""Conversions between ROS messages and the plain data of the algorithm modules, in one place:
+calibration (CameraInfo + PoseStamped <-> Camera), images (Image / CompressedImage <-> RGB
+arrays), skeletons (Skeleton <-> joint arrays), and stamps. Errors in incoming messages raise
+ValueError with a one-line reason, for the caller to log with the topic's name.
+"""
+import cv2
+import numpy as np
+from geometry_msgs.msg import Pose, PoseStamped
+from mvpose_msgs.msg import Skeleton
+from sensor_msgs.msg import CameraInfo, CompressedImage, Image
+
+from mvpose_nodes.body_model import JOINT_NAMES, joint_orientations
+from mvpose_nodes.camera import Camera
+
+WORLD_FRAME = 'world'
+
+
+def stamp_ns(header):
+    return header.stamp.sec * 10**9 + header.stamp.nanosec
+
+
+def set_stamp(header, nanoseconds, frame_id):
+    header.stamp.sec, header.stamp.nanosec = divmod(int(nanoseconds), 10**9)
+    header.frame_id = frame_id
+    return header
+
+
+def optical_frame(camera_number):
+    return f'cam{camera_number}_optical_frame'
+
+
+def calibration_messages(camera, nanoseconds):
+    """(CameraInfo, PoseStamped) of a Camera: intrinsics and plumb_bob distortion, and the optical
+    frame's pose in `world`."""
+    info = CameraInfo(width=camera.width, height=camera.height, distortion_model='plumb_bob')
+    set_stamp(info.header, nanoseconds, optical_frame(camera.number))
+    info.d = [float(v) for v in camera.D]
+    info.k = camera.K.ravel().tolist()
+    info.r = np.eye(3).ravel().tolist()
+    info.p = np.column_stack([camera.K, np.zeros(3)]).ravel().tolist()
+    pose = PoseStamped()
+    set_stamp(pose.header, nanoseconds, WORLD_FRAME)
+    position, orientation = camera.pose()
+    pose.pose.position.x, pose.pose.position.y, pose.pose.position.z = map(float, position)
+    (pose.pose.orientation.x, pose.pose.orientation.y, pose.pose.orientation.z,
+     pose.pose.orientation.w) = map(float, orientation)
+    return info, pose
+
+
+def camera_from_messages(camera_number, info, pose):
+    """The Camera of a camera_info and camera_pose pair; ValueError when they are unusable."""
+    K = np.array(info.k, dtype=float).reshape(3, 3)
+    if info.width <= 0 or info.height <= 0:
+        raise ValueError(f'camera_info has no image size ({info.width}×{info.height})')
+    if not np.all(np.isfinite(K)) or K[0, 0] <= 0 or K[1, 1] <= 0:
+        raise ValueError('camera_info K is not a valid intrinsic matrix')
+    if info.distortion_model not in ('plumb_bob', '') and any(info.d):
+        raise ValueError(f"distortion model '{info.distortion_model}' is not supported (plumb_bob only)")
+    D = np.zeros(5)
+    D[:min(5, len(info.d))] = list(info.d)[:5]
+    if pose.header.frame_id != WORLD_FRAME:
+        raise ValueError(f"camera_pose frame_id is '{pose.header.frame_id}', expected '{WORLD_FRAME}'")
+    p, q = pose.pose.position, pose.pose.orientation
+    position, orientation = np.array([p.x, p.y, p.z]), np.array([q.x, q.y, q.z, q.w])
+    if not (np.all(np.isfinite(position)) and np.all(np.isfinite(orientation)) and np.linalg.norm(orientation) > 0.5):
+        raise ValueError('camera_pose is not a finite pose with a unit quaternion')
+    if not np.all(np.isfinite(D)):
+        raise ValueError('camera_info D is not finite')
+    return Camera.from_pose(camera_number, info.width, info.height, K, position, orientation / np.linalg.norm(orientation), D)
+
+
+def compressed_image(rgb, camera_number, nanoseconds, image_format='jpeg', jpeg_quality=90):
+    """CompressedImage of an RGB uint8 (H, W, 3) image, `format` as image_transport writes it."""
+    extension, parameters = ('.jpg', [cv2.IMWRITE_JPEG_QUALITY, jpeg_quality]) if image_format == 'jpeg' \
+        else ('.png', [cv2.IMWRITE_PNG_COMPRESSION, 1])
+    ok, data = cv2.imencode(extension, cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR), parameters)
+    message = CompressedImage(format=f'rgb8; {image_format} compressed bgr8', data=data.tobytes())
+    set_stamp(message.header, nanoseconds, optical_frame(camera_number))
+    return message
+
+
+def compressed_labels(labels, camera_number, nanoseconds):
+    """CompressedImage (lossless PNG, mono8) of a ground-truth label mask (H, W) uint8."""
+    ok, data = cv2.imencode('.png', labels, [cv2.IMWRITE_PNG_COMPRESSION, 3])
+    message = CompressedImage(format='mono8; png compressed mono8', data=data.tobytes())
+    set_stamp(message.header, nanoseconds, optical_frame(camera_number))
+    return message
+
+
+def image_from_compressed(message):
+    """RGB uint8 (H, W, 3), or mono8 (H, W) for a mono8 image, of a CompressedImage; ValueError if undecodable."""
+    mono = message.format.startswith('mono8')
+    decoded = cv2.imdecode(np.frombuffer(bytes(message.data), np.uint8),
+                           cv2.IMREAD_GRAYSCALE if mono else cv2.IMREAD_COLOR)
+    if decoded is None:
+        raise ValueError(f"CompressedImage data does not decode (format '{message.format}')")
+    return decoded if mono else cv2.cvtColor(decoded, cv2.COLOR_BGR2RGB)
+
+
+def image_from_raw(message):
+    """RGB uint8 (H, W, 3) of a sensor_msgs/Image in rgb8 or bgr8; ValueError otherwise."""
+    if message.encoding not in ('rgb8', 'bgr8'):
+        raise ValueError(f"image encoding '{message.encoding}' is not supported (rgb8 or bgr8)")
+    if message.step < 3 * message.width or len(message.data) < message.step * message.height:
+        raise ValueError(f'image data ({len(message.data)} bytes) is shorter than {message.height} rows '
+                         f'of {message.step} bytes')
+    rows = np.frombuffer(bytes(message.data), np.uint8)[:message.step * message.height].reshape(message.height, message.step)
+    image = rows[:, :3 * message.width].reshape(message.height, message.width, 3)
+    return image[..., ::-1].copy() if message.encoding == 'bgr8' else image.copy()
+
+
+def mono_image(mask, header):
+    """sensor_msgs/Image mono8 of a (H, W) uint8 array with the given header."""
+    return Image(header=header, height=mask.shape[0], width=mask.shape[1], encoding='mono8', is_bigendian=0,
+                 step=mask.shape[1], data=np.ascontiguousarray(mask, np.uint8).tobytes())
+
+
+def skeleton_message(joints, nanoseconds, **fields):
+    """Skeleton with the 15 joints (15, 3) [m] and their frames (body_model.joint_orientations)."""
+    message = Skeleton(joint_names=list(JOINT_NAMES), **fields)
+    set_stamp(message.header, nanoseconds, WORLD_FRAME)
+    for position, orientation in zip(joints, joint_orientations(joints)):
+        pose = Pose()
+        pose.position.x, pose.position.y, pose.position.z = map(float, position)
+        pose.orientation.x, pose.orientation.y, pose.orientation.z, pose.orientation.w = map(float, orientation)
+        message.joints.append(pose)
+    return message
+
+
+def joints_from_skeleton(message):
+    """Joint positions (15, 3) [m] of a Skeleton, in JOINT_NAMES order whatever order it uses."""
+    index = {name: i for i, name in enumerate(message.joint_names)}
+    missing = [name for name in JOINT_NAMES if name not in index]
+    if missing or len(message.joints) != len(message.joint_names):
+        raise ValueError(f"Skeleton lacks joints {missing}" if missing else 'Skeleton joints and names differ in length')
+    return np.array([[message.joints[index[n]].position.x, message.joints[index[n]].position.y,
+                      message.joints[index[n]].position.z] for n in JOINT_NAMES])
