@@ -96,6 +96,21 @@ def test_ground_truth_joints_land_on_the_rendered_person(synth_bags):
     assert checked == len(CAMERAS) * (FRAMES[1] - FRAMES[0] + 1) * len(JOINT_NAMES)
 
 
+def test_whole_walk_of_the_paper_frames_stays_in_the_paper_cameras():
+    """Frames 52–101 at 1080p: the whole person (joints, toes, fingertips, hair above the vertex)
+    is inside the image of cameras 3, 5 and 7, as in the paper's choice of frames and cameras."""
+    from types import SimpleNamespace
+    from mvpose_nodes.camera import studio_rig
+    from mvpose_nodes.synth_cli import make_motion
+    motion = make_motion(SimpleNamespace(frames='52-101', clip='07_01', motion='walk', height=1.75, seed=0))
+    points = np.concatenate([motion.joints, motion.toes, motion.hand_tips], axis=1).reshape(-1, 3)
+    for camera in studio_rig(cameras=CAMERAS):
+        pixels, depth = camera.project(points)
+        assert np.all(depth > 0)
+        assert pixels[:, 0].min() > 20 and pixels[:, 0].max() < 1900, camera.number
+        assert pixels[:, 1].min() > 40 and pixels[:, 1].max() < 1060, camera.number
+
+
 def test_label_masks_mark_skin_only_where_skin_shows(synth_bags):
     contents = read_all(synth_bags / 'direct')
     labels = image_from_compressed(contents[camera_topics(5)['labels']][0][1])

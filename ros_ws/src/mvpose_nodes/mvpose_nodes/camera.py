@@ -16,8 +16,9 @@ from mvpose_nodes.geometry import matrix_from_quaternion, normalize, quaternion_
 RIG_CAMERAS = 8
 RIG_RADIUS = 4.0           # [m] ring diameter about 8 m
 RIG_HEIGHT = 2.0           # [m] camera height
-RIG_TARGET = (0.0, 0.0, 0.8)  # [m] where every camera looks: the middle of the capture area, hip height
-RIG_FOCAL = 1600.0         # [px] at 1920×1080: a person 3.2–5.3 m away fills 50–85 % of the image height
+RIG_TARGET = (0.0, 0.0, 0.7)  # [m] where every camera looks: the middle of the capture area, below the hips
+RIG_FOCAL = 1400.0         # [px] at 1920×1080; the walk of frames 52–101 stays whole in cameras 3, 5 and 7
+                           # (at least 70 px from every border) while filling about 55 % of the height
 RIG_RESOLUTION = (1920, 1080)
 
 
