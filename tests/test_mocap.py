@@ -104,7 +104,7 @@ def test_malformed_bvh_is_a_one_line_user_error(tmp_path, broken, fragment):
 
 
 def test_missing_clip_names_the_folder():
-    with pytest.raises(UserError, match=str(mocap.CMU_DIRECTORY)):
+    with pytest.raises(UserError, match=str(mocap.cmu_directory())):
         mocap.cmu_clip('99_99')
 
 

@@ -20,6 +20,7 @@ setup(
         (f'share/{PACKAGE}', ['package.xml']),
         (f'share/{PACKAGE}/config', glob('config/*.yaml')),
         (f'share/{PACKAGE}/launch', glob('launch/*.py')),
+        (f'share/{PACKAGE}/data/cmu', glob('data/cmu/*')),
     ],
     install_requires=['setuptools'],
     zip_safe=True,

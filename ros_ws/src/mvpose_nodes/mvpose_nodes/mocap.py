@@ -2,14 +2,13 @@
 
 Sources: the BVH format (Biovision; hierarchy of ROOT/JOINT/End Site with OFFSET and CHANNELS, then
 MOTION rows), and the CMU Graphics Lab Motion Capture Database in B. Hahne's MotionBuilder-friendly
-BVH conversion (README-cmu.txt in CMU_DIRECTORY: frame 1 of every file is an added T-pose facing
+BVH conversion (shipped in the package's share/mvpose_nodes/data/cmu with its README-cmu.txt: frame 1 of every file is an added T-pose facing
 +Z, Y up, subject's left at +X, 120 fps).
 
 Project world: metres, z up, floor at z = 0. NumPy only (no rclpy), so tests and tools can use it
 without a ROS graph.
 """
 import dataclasses
-import os
 from pathlib import Path
 
 import numpy as np
@@ -18,8 +17,6 @@ from mvpose_nodes.body_model import JOINT_NAMES
 from mvpose_nodes.errors import UserError
 from mvpose_nodes.geometry import matrix_from_quaternion, rotation_between
 
-CMU_DIRECTORY = (Path(os.environ.get('MVPOSE_ROOT', Path(__file__).resolve().parents[4])) / '..'
-                 / 'shared' / 'data' / 'cmu').resolve()
 
 # +90° about x: BVH (x, y, z) → project (x, −z, y); Y up becomes z up, the T-pose's +Z facing becomes −y.
 BVH_TO_WORLD = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
@@ -42,11 +39,19 @@ HAND_TIPS = ('LeftHandIndex1_end', 'RightHandIndex1_end')
 CHANNEL_NAMES = ('Xposition', 'Yposition', 'Zposition', 'Xrotation', 'Yrotation', 'Zrotation')
 
 
+def cmu_directory():
+    """The CMU clips shipped with the package (share/mvpose_nodes/data/cmu)."""
+    from ament_index_python.packages import get_package_share_directory
+    return Path(get_package_share_directory('mvpose_nodes')) / 'data' / 'cmu'
+
+
 def cmu_clip(name):
-    """Path of a CMU clip in CMU_DIRECTORY by name ('07_01' or '07_01.bvh'); UserError when missing."""
-    path = CMU_DIRECTORY / (name if name.endswith('.bvh') else f'{name}.bvh')
+    """Path of a shipped CMU clip by name ('07_01' or '07_01.bvh'); UserError when missing."""
+    directory = cmu_directory()
+    path = directory / (name if name.endswith('.bvh') else f'{name}.bvh')
     if not path.is_file():
-        raise UserError(f'no motion-capture clip {path.name} in {CMU_DIRECTORY}')
+        clips = ', '.join(sorted(p.stem for p in directory.glob('*.bvh')))
+        raise UserError(f'no motion-capture clip {path.name} in {directory} (clips: {clips})')
     return path
 
 
