@@ -6,6 +6,7 @@ PACKAGE = 'mvpose_nodes'
 
 # Every node and tool is a console script in lib/mvpose_nodes, where `ros2 run` finds it.
 EXECUTABLES = {
+    'camera_features': 'mvpose_nodes.camera_features_node:main',
     'bag': 'mvpose_nodes.bag_cli:main',
     'topic': 'mvpose_nodes.topic_cli:main',
     'launch': 'mvpose_nodes.launcher:main',
@@ -20,6 +21,7 @@ setup(
         (f'share/{PACKAGE}', ['package.xml']),
         (f'share/{PACKAGE}/config', glob('config/*.yaml')),
         (f'share/{PACKAGE}/launch', glob('launch/*.py')),
+        (f'share/{PACKAGE}/data', glob('data/*.npz')),
         (f'share/{PACKAGE}/data/cmu', glob('data/cmu/*')),
     ],
     install_requires=['setuptools'],

@@ -8,6 +8,9 @@ Topics of camera K (i3DPost camera number 1..8):
 and /mvpose/ground_truth (mvpose_msgs/Skeleton), once per frame in synthetic bags.
 Frame N of a sequence has the stamp FRAME_EPOCH_NS + N / FRAME_RATE.
 """
+import re
+from dataclasses import dataclass, field
+
 from rclpy.serialization import serialize_message
 
 from mvpose_nodes.bagfile import BagWriter
@@ -16,8 +19,11 @@ from mvpose_nodes.rosconv import calibration_messages, skeleton_message
 FRAME_RATE = 25.0  # [Hz] i3DPost's
 FRAME_EPOCH_NS = 1_230_768_000_000_000_000  # stamp of frame 0 (2009-01-01, the year i3DPost was recorded)
 GROUND_TRUTH_TOPIC = '/mvpose/ground_truth'
+SKELETON_TOPIC = '/mvpose/skeleton'  # the fitted skeleton, in recorded output bags
 LATCHED_QOS = {'history': 'keep_last', 'depth': 1, 'reliability': 'reliable', 'durability': 'transient_local'}
 STREAM_QOS = {'history': 'keep_last', 'depth': 10, 'reliability': 'reliable', 'durability': 'volatile'}
+CAMERA_TOPIC = re.compile(r'^/cam(?P<camera>\d+)/(?P<kind>camera_info|camera_pose|image_raw(/compressed)?'
+                          r'|ground_truth/labels/compressed)$')
 
 
 def frame_stamp_ns(frame_number):
@@ -67,3 +73,64 @@ class CameraBagWriter:
 
     def __exit__(self, *exc):
         self.bag.close()
+
+
+@dataclass
+class FrameSet:
+    """All cameras of one frame of a bag: RGB images, ground-truth label masks (synthetic bags),
+    the cameras as the bag calibrates them, and the skeletons' joints (15, 3) [m] by topic
+    (ground truth and, in recorded output, the fitted skeleton)."""
+    frame: int
+    stamp_ns: int
+    images: dict = field(default_factory=dict)
+    labels: dict = field(default_factory=dict)
+    cameras: dict = field(default_factory=dict)
+    skeletons: dict = field(default_factory=dict)
+
+    @property
+    def truth(self):
+        return self.skeletons.get(GROUND_TRUTH_TOPIC)
+
+
+def frame_sets(bag_path, cameras=None):
+    """Yield the FrameSets of a bag of this contract in stamp order (cameras: numbers to keep, None = all)."""
+    from rclpy.serialization import deserialize_message
+    from mvpose_nodes.bagfile import BagReader
+    from mvpose_nodes.errors import UserError
+    from mvpose_nodes.interfaces import message_class
+    from mvpose_nodes.rosconv import (camera_from_messages, image_from_compressed, image_from_raw,
+                                      joints_from_skeleton, stamp_ns)
+    bag = BagReader(bag_path)
+    calibration, pending = {}, {}
+    wanted = None if cameras is None else {int(k) for k in cameras}
+    for info, _, data in bag.messages():
+        match = CAMERA_TOPIC.match(info.name)
+        number = int(match['camera']) if match else None
+        if number is not None and wanted is not None and number not in wanted:
+            continue
+        message = deserialize_message(data, message_class(info.type))
+        if match and match['kind'] in ('camera_info', 'camera_pose'):
+            calibration.setdefault(number, {})[match['kind']] = message
+            continue
+        if not (match or info.name in (GROUND_TRUTH_TOPIC, SKELETON_TOPIC)):
+            continue
+        stamp = stamp_ns(message.header)
+        frame = pending.setdefault(stamp, FrameSet(frame_number_of(stamp), stamp))
+        try:
+            if not match:
+                frame.skeletons[info.name] = joints_from_skeleton(message)
+            elif match['kind'] == 'ground_truth/labels/compressed':
+                frame.labels[number] = image_from_compressed(message)
+            elif match['kind'] in ('image_raw/compressed', 'image_raw'):
+                frame.images[number] = image_from_compressed(message) if match['kind'].endswith('compressed') \
+                    else image_from_raw(message)
+                parts = calibration.get(number, {})
+                if len(parts) < 2:
+                    raise UserError(f"bag '{bag_path}': camera {number} has no camera_info/camera_pose before its images")
+                frame.cameras[number] = camera_from_messages(number, parts['camera_info'], parts['camera_pose'])
+        except ValueError as error:
+            raise UserError(f"bag '{bag_path}': {info.name}: {error}") from None
+        for earlier in [s for s in pending if s < stamp]:  # a frame is complete once a later one starts
+            yield pending.pop(earlier)
+    for stamp in sorted(pending):
+        yield pending.pop(stamp)

@@ -27,6 +27,8 @@ ROUTED_TOOLS = {
     'synth': ('mvpose_nodes.synth_cli', 'make an i3DPost-like multi-camera bag with exact ground truth'),
     'preview': ('mvpose_nodes.preview', 'contact sheet of every camera of a bag at one frame, skeleton drawn on'),
     'import-i3dpost': ('mvpose_nodes.import_cli', 'turn i3DPost dataset frames and calibration into a bag'),
+    'features': ('mvpose_nodes.features_cli', 'evaluate or benchmark the camera-feature pipeline on a bag'),
+    'skin': ('mvpose_nodes.skin_cli', 'train the skin colour model'),
 }
 
 

@@ -2,7 +2,6 @@
 skeletons projected on (like paper 000's Fig. 10): the ground truth (white) and, where the bag has
 it, the fitted /mvpose/skeleton (left side green, right side orange, centre yellow)."""
 import math
-import re
 import sys
 from pathlib import Path
 
@@ -10,12 +9,10 @@ import cv2
 import numpy as np
 
 from mvpose_nodes.body_model import BONES, JOINT_NAMES
-from mvpose_nodes.camera_bag import GROUND_TRUTH_TOPIC, frame_number_of, frame_stamp_ns
+from mvpose_nodes.camera_bag import GROUND_TRUTH_TOPIC
 from mvpose_nodes.errors import ArgumentParser, UserError, exit_on_user_error
 
-IMAGE_TOPIC = re.compile(r'^/cam(\d+)/image_raw(/compressed)?$')
 TILE_WIDTH = 640  # [px] of each camera's tile in the sheet
-FITTED_TOPIC = '/mvpose/skeleton'
 INDEX = {name: i for i, name in enumerate(JOINT_NAMES)}
 COLOURS = {'left': (60, 220, 60), 'right': (255, 140, 30), 'centre': (250, 230, 40), 'truth': (255, 255, 255)}
 
@@ -42,42 +39,17 @@ def main(argv=None, prog='preview'):
 
 
 def frame_contents(bag_path, frame):
-    """{camera number: (Camera, RGB image)} and {topic: joints (15, 3)} of one frame of a bag."""
-    from rclpy.serialization import deserialize_message
-    from mvpose_nodes.bagfile import BagReader
-    from mvpose_nodes.interfaces import message_class
-    from mvpose_nodes.rosconv import (camera_from_messages, image_from_compressed, image_from_raw,
-                                      joints_from_skeleton, stamp_ns)
-
-    bag = BagReader(bag_path)
-    cameras = sorted({int(m[1]) for t in bag.topics if (m := IMAGE_TOPIC.match(t))})
-    if not cameras:
+    """The FrameSet (camera_bag) of frame number `frame` of a bag (None: its first frame with images)."""
+    from mvpose_nodes.camera_bag import frame_sets
+    seen = []
+    for frame_set in frame_sets(bag_path):
+        if frame_set.images:
+            seen.append(frame_set.frame)
+            if frame is None or frame_set.frame == frame:
+                return frame_set
+    if not seen:
         raise UserError(f"bag '{bag_path}' has no /cam<K>/image_raw[/compressed] topic")
-    if frame is None:
-        frame = frame_number_of(bag.start_ns) if bag.start_ns >= frame_stamp_ns(0) else 0
-    wanted = frame_stamp_ns(frame)
-    calibration, images, skeletons = {}, {}, {}
-    for info, log_time, data in bag.messages():
-        message = deserialize_message(data, message_class(info.type))
-        if info.name.endswith(('/camera_info', '/camera_pose')):
-            calibration.setdefault(info.name, message)
-        elif hasattr(message, 'header') and stamp_ns(message.header) == wanted:
-            if (match := IMAGE_TOPIC.match(info.name)):
-                images[int(match[1])] = image_from_compressed(message) if match[2] else image_from_raw(message)
-            elif info.name in (FITTED_TOPIC, GROUND_TRUTH_TOPIC):
-                skeletons[info.name] = joints_from_skeleton(message)
-        if log_time > wanted + 10**9:
-            break
-    if not images:
-        raise UserError(f"bag '{bag_path}' has no image at frame {frame} (its frames: "
-                        f'{frame_number_of(bag.start_ns)}–{frame_number_of(bag.end_ns)})')
-    views = {}
-    for number, image in images.items():
-        info, pose = calibration.get(f'/cam{number}/camera_info'), calibration.get(f'/cam{number}/camera_pose')
-        if info is None or pose is None:
-            raise UserError(f"bag '{bag_path}': camera {number} has no camera_info or camera_pose")
-        views[number] = (camera_from_messages(number, info, pose), image)
-    return frame, views, skeletons
+    raise UserError(f"bag '{bag_path}' has no image at frame {frame} (its frames: {seen[0]}–{seen[-1]})")
 
 
 def draw_skeleton(image, camera, joints, truth):
@@ -99,12 +71,13 @@ def draw_skeleton(image, camera, joints, truth):
 
 def contact_sheet(bag_path, frame):
     """(frame, RGB uint8 sheet): every camera's image at `frame` with the skeletons drawn, in a grid."""
-    frame, views, skeletons = frame_contents(bag_path, frame)
+    frame_set = frame_contents(bag_path, frame)
+    frame = frame_set.frame
     tiles = []
-    for number, (camera, image) in sorted(views.items()):
+    for number, image in sorted(frame_set.images.items()):
         canvas = image.copy()
-        for topic, joints in sorted(skeletons.items()):
-            draw_skeleton(canvas, camera, joints, truth=topic == GROUND_TRUTH_TOPIC)
+        for topic, joints in sorted(frame_set.skeletons.items()):
+            draw_skeleton(canvas, frame_set.cameras[number], joints, truth=topic == GROUND_TRUTH_TOPIC)
         tile = cv2.resize(canvas, (TILE_WIDTH, round(TILE_WIDTH * image.shape[0] / image.shape[1])),
                           interpolation=cv2.INTER_AREA)
         cv2.putText(tile, f'cam{number}  frame {frame}', (12, 30), cv2.FONT_HERSHEY_SIMPLEX, 0.8, (255, 255, 255), 2,

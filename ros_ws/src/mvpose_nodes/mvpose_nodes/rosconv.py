@@ -1,12 +1,13 @@
 """Conversions between ROS messages and the plain data of the algorithm modules, in one place:
 calibration (CameraInfo + PoseStamped <-> Camera), images (Image / CompressedImage <-> RGB
-arrays), skeletons (Skeleton <-> joint arrays), and stamps. Errors in incoming messages raise
+arrays), camera features (features.Features -> silhouette, SkinEllipseArray, LabelledContour),
+skeletons (Skeleton <-> joint arrays), and stamps. Errors in incoming messages raise
 ValueError with a one-line reason, for the caller to log with the topic's name.
 """
 import cv2
 import numpy as np
 from geometry_msgs.msg import Pose, PoseStamped
-from mvpose_msgs.msg import Skeleton
+from mvpose_msgs.msg import Keypoint2D, LabelledContour, Skeleton, SkinEllipse, SkinEllipseArray
 from sensor_msgs.msg import CameraInfo, CompressedImage, Image
 
 from mvpose_nodes.body_model import JOINT_NAMES, joint_orientations
@@ -135,3 +136,47 @@ def joints_from_skeleton(message):
         raise ValueError(f"Skeleton lacks joints {missing}" if missing else 'Skeleton joints and names differ in length')
     return np.array([[message.joints[index[n]].position.x, message.joints[index[n]].position.y,
                       message.joints[index[n]].position.z] for n in JOINT_NAMES])
+
+
+def keypoint_message(name, keypoint):
+    return Keypoint2D(name=name, x=float(keypoint.x), y=float(keypoint.y), confidence=float(keypoint.confidence),
+                      visible=bool(keypoint.visible))
+
+
+def feature_messages(features, header, status_message=''):
+    """(silhouette Image, SkinEllipseArray, LabelledContour) of features.Features, with `header`."""
+    silhouette = mono_image(features.silhouette.astype(np.uint8) * 255, header)
+    status = SkinEllipseArray.STATUS_OK if features.person else SkinEllipseArray.STATUS_NO_PERSON
+    message = status_message or ('' if features.person else 'no person in the image')
+    ellipses = SkinEllipseArray(header=header, status=status, status_message=message)
+    for e in features.ellipses:
+        ellipses.ellipses.append(SkinEllipse(
+            center_x=float(e.center[0]), center_y=float(e.center[1]), semi_major=float(e.semi_major),
+            semi_minor=float(e.semi_minor), angle=float(e.angle), major_end_a=keypoint_message('end_a', e.end_a),
+            major_end_b=keypoint_message('end_b', e.end_b), area=int(e.area), role=int(e.role), side=int(e.side),
+            confidence=float(e.confidence)))
+    skin_names = ('head', 'neck', 'left_wrist', 'right_wrist', 'left_elbow', 'right_elbow')
+    silhouette_names = ('root', 'left_ankle', 'right_ankle', 'left_knee', 'right_knee')
+    ellipses.keypoints = [keypoint_message(n, features.keypoints[n]) for n in skin_names if n in features.keypoints]
+    contour = LabelledContour(header=header, status=status, status_message=message)
+    contour.keypoints = [keypoint_message(n, features.keypoints[n]) for n in silhouette_names
+                         if n in features.keypoints]
+    if features.contour is not None and len(features.contour.points):
+        contour.x = features.contour.points[:, 0].astype(np.uint16).tolist()
+        contour.y = features.contour.points[:, 1].astype(np.uint16).tolist()
+        contour.labels = features.contour.labels.tobytes()
+        contour.sides = features.contour.sides.tobytes()
+    return silhouette, ellipses, contour
+
+
+def empty_feature_messages(header, width, height, status, reason):
+    """Feature messages that say why there are none (status STATUS_NO_PERSON or STATUS_BAD_INPUT)."""
+    silhouette = mono_image(np.zeros((max(height, 0), max(width, 0)), np.uint8), header)
+    return (silhouette, SkinEllipseArray(header=header, status=status, status_message=reason),
+            LabelledContour(header=header, status=status, status_message=reason))
+
+
+def rgb_image(rgb, header):
+    """sensor_msgs/Image rgb8 of an RGB uint8 (H, W, 3) array."""
+    return Image(header=header, height=rgb.shape[0], width=rgb.shape[1], encoding='rgb8', is_bigendian=0,
+                 step=3 * rgb.shape[1], data=np.ascontiguousarray(rgb).tobytes())

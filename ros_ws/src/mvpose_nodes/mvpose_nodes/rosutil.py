@@ -1,5 +1,6 @@
 """rclpy helpers shared by the nodes and tools: the Jazzy run pattern, QoS conversions, graph look-ups."""
 import signal
+import sys
 import threading
 import time
 
@@ -10,10 +11,12 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rclpy.signals import SignalHandlerOptions
 
 from mvpose_nodes.bagfile import DEFAULT_QOS_PROFILE
+from mvpose_nodes.errors import UserError
 
 
 def run_node(make_node, args=None):
-    """Jazzy's rclpy run pattern for a node that spins until Ctrl-C or shutdown."""
+    """Jazzy's rclpy run pattern for a node that spins until Ctrl-C or shutdown; the exit code.
+    A UserError while the node starts (bad parameter, namespace, model file) is one line and code 2."""
     rclpy.init(args=args)
     node = None
     try:
@@ -21,10 +24,14 @@ def run_node(make_node, args=None):
         rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
+    except UserError as error:
+        print(f'[ERROR] {make_node.__name__}: {error}', file=sys.stderr)
+        return 2
     finally:
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
+    return 0
 
 
 class StopSignal:

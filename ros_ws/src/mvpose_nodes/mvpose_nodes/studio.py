@@ -36,14 +36,19 @@ SHADOW_BLUR = 0.05        # [m] penumbra (sigma)
 SHADOW_STRENGTH = 0.55
 
 
+SKIN_TONES = {'light': (0.75, 0.52, 0.42), 'medium': (0.62, 0.40, 0.30), 'dark': (0.28, 0.16, 0.10)}
+SHIRTS = {'red': (0.55, 0.12, 0.10), 'green': (0.12, 0.35, 0.12), 'grey': (0.30, 0.30, 0.30),
+          'white': (0.80, 0.80, 0.78), 'yellow': (0.70, 0.55, 0.08)}
+
+
 @dataclass(frozen=True)
 class Appearance:
     """How the person looks: linear-RGB albedos, clothing and size. Radii scale with `girth`."""
-    skin: tuple = (0.62, 0.40, 0.30)
+    skin: tuple = SKIN_TONES['medium']
     hair: tuple = (0.06, 0.04, 0.03)
-    shirt: tuple = (0.55, 0.12, 0.10)
+    shirt: tuple = SHIRTS['red']
     trousers: tuple = (0.08, 0.08, 0.09)
-    shoes: tuple = (0.12, 0.08, 0.05)
+    shoes: tuple = (0.035, 0.035, 0.04)  # black: brown leather is skin-coloured to any colour detector
     long_sleeves: bool = False
     girth: float = 1.0
 

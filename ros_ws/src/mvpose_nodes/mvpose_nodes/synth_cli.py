@@ -39,6 +39,9 @@ def build_parser(prog):
     body.add_argument('--height', type=float, default=1.75, help='[m] standing height (default 1.75)')
     body.add_argument('--girth', type=float, default=1.0, help='scale of limb and torso thickness (default 1)')
     body.add_argument('--long-sleeves', action='store_true', help='forearms covered: only hands and face are skin')
+    body.add_argument('--skin-tone', choices=['light', 'medium', 'dark'], default='medium', help='(default medium)')
+    body.add_argument('--shirt', choices=['red', 'green', 'grey', 'white', 'yellow'], default='red',
+                      help='shirt colour (default red)')
     realism = parser.add_argument_group('realism (on by default; each can be turned off)')
     realism.add_argument('--no-soft-shading', action='store_true', help='flat colours instead of shaded solids')
     realism.add_argument('--no-shadow', action='store_true', help='no shadow on the floor')
@@ -176,7 +179,8 @@ def synthesize(args):
           f'-> {args.output}', file=sys.stderr, flush=True)
     _SETTINGS = SynthSettings(
         views=[studio.prepare_camera(camera, texture_seed=camera.number) for camera in selected],
-        appearance=studio.Appearance(long_sleeves=args.long_sleeves, girth=args.girth),
+        appearance=studio.Appearance(skin=studio.SKIN_TONES[args.skin_tone], shirt=studio.SHIRTS[args.shirt],
+                                     long_sleeves=args.long_sleeves, girth=args.girth),
         realism=studio.Realism(args.exposure_variation, args.white_balance_variation, args.noise, args.blur),
         seed=args.seed, soft_shading=not args.no_soft_shading, shadow=not args.no_shadow,
         image_format=args.image_format, jpeg_quality=args.jpeg_quality, layout_sequence=layout_sequence)

@@ -1,0 +1,182 @@
+"""Silhouettes by background subtraction, and the keypoints read off them (paper 000 Sec. 3.1).
+
+Two background models: a chroma key for blue-screen studios such as i3DPost's ("a simple
+threshold separates the person"), and a learned per-pixel Gaussian model for ordinary scenes
+(from person-free frames, or kept up to date as a running average where no person is). Either
+mask is cleaned the same way: opening, closing, the largest blob kept, its holes filled.
+Keypoints: the centroid of the silhouette (root estimate, P1), and the ankles and knees as
+centroids of the silhouette restricted to rectangles around each foot and knee.
+
+Images are RGB uint8 (H, W, 3); masks bool (H, W); points (x, y) in pixels, x right, y down.
+"""
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+BLUENESS_THRESHOLD = 25   # [DN] b − max(r, g) above which a pixel is blue screen
+MIN_PERSON_AREA = 2000    # [px] at 1080p: smaller blobs are not a person (scaled with the image area)
+MAX_HOLE_FRACTION = 0.002  # holes up to this share of the person's area are keying misses, and filled
+# Anthropometric bands, as fractions of the silhouette height above its lowest pixel (person standing).
+LEG_CUT = 0.34            # legs are the silhouette below this height (below the hands, above the knees)
+ANKLE_HEIGHT = 0.045      # the ankle joint lies 4–5 % of the stature above the sole
+SHIN_BANDS = ((0.08, 0.13), (0.13, 0.18))  # above the shoe: only the shin, whose axis leads down to the ankle
+KNEE_BAND = (0.27, 0.33)  # the knee joint lies at about 30 % of the stature
+
+
+def chroma_key_foreground(rgb, threshold=BLUENESS_THRESHOLD):
+    """Pixels that are not blue screen: b − max(r, g) <= threshold. (H, W) bool."""
+    red, green, blue = cv2.split(rgb)
+    blueness = cv2.subtract(blue, cv2.max(red, green))  # saturates at 0 for non-blue pixels
+    return blueness <= threshold
+
+
+class BackgroundModel:
+    """Per-pixel Gaussian background (mean and variance per channel) for ordinary scenes.
+
+    A pixel is foreground when any channel differs from the mean by more than `k` standard
+    deviations (with a floor on sigma, so that a static, noise-free background still tolerates
+    sensor noise). `update` keeps the model current where no person is (running average with
+    `learning_rate`), which follows slow lighting changes."""
+
+    def __init__(self, mean, variance, k=4.0, min_sigma=6.0, learning_rate=0.02):
+        self.mean = mean.astype(np.float32)
+        self.variance = variance.astype(np.float32)
+        self.k, self.min_sigma, self.learning_rate = k, min_sigma, learning_rate
+
+    @classmethod
+    def from_frames(cls, frames, **options):
+        """The model of person-free frames: a sequence of RGB uint8 (H, W, 3) images."""
+        stack = np.stack([f.astype(np.float32) for f in frames])
+        return cls(stack.mean(axis=0), stack.var(axis=0), **options)
+
+    def foreground(self, rgb):
+        sigma = np.maximum(np.sqrt(self.variance), self.min_sigma)
+        return np.any(np.abs(rgb.astype(np.float32) - self.mean) > self.k * sigma, axis=2)
+
+    def update(self, rgb, foreground):
+        """Blend the current frame into the model where it shows background."""
+        background = ~foreground[..., None]
+        difference = rgb.astype(np.float32) - self.mean
+        rate = self.learning_rate * background
+        self.mean += rate * difference
+        self.variance += rate * (difference ** 2 - self.variance)
+
+
+def clean_mask(foreground, min_area=MIN_PERSON_AREA, opening=2, closing=4, max_hole_fraction=MAX_HOLE_FRACTION):
+    """The person's blob: opening (radius `opening` px), closing (radius `closing`), the largest
+    8-connected component if it has at least `min_area` px, its small holes filled (up to
+    `max_hole_fraction` of its area: keying misses, not the real gaps between legs or arm and body,
+    which the blob also encloses where feet or hands touch). (H, W) bool; empty if none."""
+    mask = foreground.astype(np.uint8)
+    if opening:
+        mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, _disk(opening))
+    if closing:
+        mask = cv2.morphologyEx(mask, cv2.MORPH_CLOSE, _disk(closing))
+    count, labels, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
+    if count < 2:
+        return np.zeros(foreground.shape, bool)
+    largest = 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
+    if stats[largest, cv2.CC_STAT_AREA] < min_area:
+        return np.zeros(foreground.shape, bool)
+    x, y, w, h = (stats[largest, i] for i in (cv2.CC_STAT_LEFT, cv2.CC_STAT_TOP, cv2.CC_STAT_WIDTH,
+                                               cv2.CC_STAT_HEIGHT))
+    blob = (labels[y:y + h, x:x + w] == largest).astype(np.uint8)
+    # Holes: background components of the box that do not touch its border.
+    padded = cv2.copyMakeBorder(1 - blob, 1, 1, 1, 1, cv2.BORDER_CONSTANT, value=1)
+    count, holes, hole_stats, _ = cv2.connectedComponentsWithStats(padded, connectivity=4)
+    outside = holes[0, 0]
+    small = [i for i in range(1, count) if i != outside
+             and hole_stats[i, cv2.CC_STAT_AREA] <= max_hole_fraction * stats[largest, cv2.CC_STAT_AREA]]
+    filled = blob.astype(bool) | np.isin(holes[1:-1, 1:-1], small)
+    person = np.zeros(foreground.shape, bool)
+    person[y:y + h, x:x + w] = filled
+    return person
+
+
+def _disk(radius):
+    return cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1, 2 * radius + 1))
+
+
+@dataclass
+class SilhouetteKeypoints:
+    """Keypoints of one silhouette, each (x, y) [px] or None, with a confidence in [0, 1]. The two
+    legs are not yet the person's left or right: `legs` is ordered by image x (image-left first)."""
+    root: tuple
+    height: float                # [px] of the silhouette's bounding box
+    top: tuple                   # the highest silhouette pixel (x, y)
+    legs: list                   # per leg found: {'ankle': (x, y), 'knee': (x, y) or None, 'confidence': c}
+
+
+def silhouette_keypoints(mask):
+    """Root (centroid of all foreground pixels), top, and per leg the ankle and knee (paper 000 Sec. 3.1)."""
+    rows, columns = np.nonzero(mask)
+    if rows.size == 0:
+        return None
+    top_row, bottom_row = rows.min(), rows.max()
+    height = float(bottom_row - top_row + 1)
+    top_columns = columns[rows == top_row]
+    root = (float(columns.mean()), float(rows.mean()))
+    legs = _legs(mask, bottom_row, height)
+    return SilhouetteKeypoints(root, height, (float(top_columns.mean()), float(top_row)), legs)
+
+
+def _band_centroid(mask, bottom_row, height, band, column_range=None):
+    """Centroid (x, y) of the mask pixels between band[0] and band[1] × height above bottom_row."""
+    low = int(round(bottom_row - band[1] * height))
+    high = int(round(bottom_row - band[0] * height)) + 1
+    region = mask[max(low, 0):high]
+    if column_range is not None:
+        region = region[:, column_range[0]:column_range[1]]
+    rows, columns = np.nonzero(region)
+    if rows.size == 0:
+        return None
+    offset = column_range[0] if column_range is not None else 0
+    return float(columns.mean() + offset), float(rows.mean() + max(low, 0))
+
+
+def _legs(mask, bottom_row, height):
+    """The legs: connected parts of the silhouette below LEG_CUT; when both feet merge into one
+    part (legs crossing or together), that part is split at its median column."""
+    cut = int(round(bottom_row - LEG_CUT * height))
+    below = mask[cut:bottom_row + 1].astype(np.uint8)
+    count, labels, stats, _ = cv2.connectedComponentsWithStats(below, connectivity=8)
+    parts = sorted(range(1, count), key=lambda i: -stats[i, cv2.CC_STAT_AREA])[:2]
+    parts = [p for p in parts if stats[p, cv2.CC_STAT_AREA] > 0.1 * stats[parts[0], cv2.CC_STAT_AREA]]
+    legs = []
+    if len(parts) == 2:
+        for part in parts:
+            leg = np.zeros_like(mask)
+            leg[cut:bottom_row + 1] = labels == part
+            leg_rows = np.nonzero(leg.any(axis=1))[0]
+            legs.append(_leg(leg, leg_rows.max(), bottom_row, height, confidence=0.9))
+    elif len(parts) == 1:
+        part_mask = np.zeros_like(mask)
+        part_mask[cut:bottom_row + 1] = labels == parts[0]
+        split = int(np.median(np.nonzero(part_mask)[1]))
+        for columns, confidence in (((0, split), 0.5), ((split, mask.shape[1]), 0.5)):
+            leg = np.zeros_like(mask)
+            leg[:, columns[0]:columns[1]] = part_mask[:, columns[0]:columns[1]]
+            leg_rows = np.nonzero(leg.any(axis=1))[0]
+            if leg_rows.size:
+                legs.append(_leg(leg, leg_rows.max(), bottom_row, height, confidence))
+    legs = [leg for leg in legs if leg['ankle'] is not None]
+    return sorted(legs, key=lambda leg: leg['ankle'][0])
+
+
+def _leg(leg_mask, leg_bottom, bottom_row, height, confidence):
+    """Ankle: the shin's axis (centroids of two bands above the shoe) followed down to ANKLE_HEIGHT
+    above the leg's own lowest pixel (a lifted foot is still a foot; the foot itself would pull a
+    centroid towards the toes). Knee: above the floor contact (the lowest pixel of the whole
+    silhouette), where both knees stay while walking."""
+    lower, upper = (_band_centroid(leg_mask, leg_bottom, height, band) for band in SHIN_BANDS)
+    ankle_row = leg_bottom - ANKLE_HEIGHT * height
+    if lower is None:
+        ankle = None
+    elif upper is None or abs(upper[1] - lower[1]) < 1:
+        ankle = (lower[0], ankle_row)
+    else:
+        slope = (lower[0] - upper[0]) / (lower[1] - upper[1])  # columns per row along the shin
+        ankle = (lower[0] + slope * (ankle_row - lower[1]), ankle_row)
+    return {'ankle': ankle, 'knee': _band_centroid(leg_mask, bottom_row, height, KNEE_BAND),
+            'confidence': confidence}
