@@ -36,8 +36,13 @@ class BackgroundModel:
 
     A pixel is foreground when any channel differs from the mean by more than `k` standard
     deviations (with a floor on sigma, so that a static, noise-free background still tolerates
-    sensor noise). `update` keeps the model current where no person is (running average with
-    `learning_rate`), which follows slow lighting changes."""
+    sensor noise), unless it is a cast shadow: the background's colour scaled by a brightness
+    factor in SHADOW_BRIGHTNESS with a colour distortion under SHADOW_CHROMA of its brightness
+    (Horprasert, Harwood & Davis 1999). `update` keeps the model current where no person is
+    (running average with `learning_rate`), which follows slow lighting changes."""
+
+    SHADOW_BRIGHTNESS = (0.3, 0.95)
+    SHADOW_CHROMA = 0.06
 
     def __init__(self, mean, variance, k=4.0, min_sigma=6.0, learning_rate=0.02):
         self.mean = mean.astype(np.float32)
@@ -50,9 +55,18 @@ class BackgroundModel:
         stack = np.stack([f.astype(np.float32) for f in frames])
         return cls(stack.mean(axis=0), stack.var(axis=0), **options)
 
-    def foreground(self, rgb):
-        sigma = np.maximum(np.sqrt(self.variance), self.min_sigma)
-        return np.any(np.abs(rgb.astype(np.float32) - self.mean) > self.k * sigma, axis=2)
+    def foreground(self, rgb, window=(slice(None), slice(None))):
+        """Foreground of `rgb`, the part `window` (row and column slices, possibly strided) of the image."""
+        mean = self.mean[window]
+        pixels = rgb.astype(np.float32)
+        sigma = np.maximum(np.sqrt(self.variance[window]), self.min_sigma)
+        changed = np.any(np.abs(pixels - mean) > self.k * sigma, axis=2)
+        brightness = np.sum(pixels * mean, axis=2) / np.maximum(np.sum(mean * mean, axis=2), 1.0)
+        distortion = np.linalg.norm(pixels - brightness[..., None] * mean, axis=2)
+        low, high = self.SHADOW_BRIGHTNESS
+        shadow = (brightness > low) & (brightness < high) & (
+            distortion < self.SHADOW_CHROMA * brightness * np.linalg.norm(mean, axis=2) + self.k * self.min_sigma)
+        return changed & ~shadow
 
     def update(self, rgb, foreground):
         """Blend the current frame into the model where it shows background."""
