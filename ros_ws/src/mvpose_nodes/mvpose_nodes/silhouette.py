@@ -20,7 +20,7 @@ MAX_HOLE_FRACTION = 0.002  # holes up to this share of the person's area are key
 # Anthropometric bands, as fractions of the silhouette height above its lowest pixel (person standing).
 LEG_CUT = 0.34            # legs are the silhouette below this height (below the hands, above the knees)
 ANKLE_HEIGHT = 0.045      # the ankle joint lies 4–5 % of the stature above the sole
-SHIN_BANDS = ((0.08, 0.13), (0.13, 0.18))  # above the shoe: only the shin, whose axis leads down to the ankle
+SHIN_BAND = (0.06, 0.18)  # above a foot's lowest pixel: mostly the shin, whose axis leads down to the ankle
 KNEE_BAND = (0.27, 0.33)  # the knee joint lies at about 30 % of the stature
 
 
@@ -179,18 +179,27 @@ def _legs(mask, bottom_row, height):
 
 
 def _leg(leg_mask, leg_bottom, bottom_row, height, confidence):
-    """Ankle: the shin's axis (centroids of two bands above the shoe) followed down to ANKLE_HEIGHT
-    above the leg's own lowest pixel (a lifted foot is still a foot; the foot itself would pull a
-    centroid towards the toes). Knee: above the floor contact (the lowest pixel of the whole
-    silhouette), where both knees stay while walking."""
-    lower, upper = (_band_centroid(leg_mask, leg_bottom, height, band) for band in SHIN_BANDS)
-    ankle_row = leg_bottom - ANKLE_HEIGHT * height
-    if lower is None:
-        ankle = None
-    elif upper is None or abs(upper[1] - lower[1]) < 1:
-        ankle = (lower[0], ankle_row)
-    else:
-        slope = (lower[0] - upper[0]) / (lower[1] - upper[1])  # columns per row along the shin
-        ankle = (lower[0] + slope * (ankle_row - lower[1]), ankle_row)
+    """Ankle: the shin's axis (principal axis of the leg's pixels in SHIN_BAND above its lowest pixel)
+    followed down to where it leaves the leg (the sole, or the heel of a foot that points down at
+    toe-off), then ANKLE_HEIGHT of the stature back up it. A centroid of the foot would be pulled
+    towards the toes. Knee: above the floor contact (the lowest pixel of the whole silhouette),
+    where both knees stay while walking."""
+    low = max(int(round(leg_bottom - SHIN_BAND[1] * height)), 0)
+    high = int(round(leg_bottom - SHIN_BAND[0] * height)) + 1
+    rows, columns = np.nonzero(leg_mask[low:high])
+    ankle = None
+    if rows.size >= 10:
+        points = np.column_stack([columns, rows + low]).astype(float)
+        center = points.mean(axis=0)
+        _, _, axes = np.linalg.svd(points - center, full_matrices=False)
+        down = axes[0] if axes[0][1] > 0 else -axes[0]
+        exit_point = center
+        for _ in range(int(height)):
+            ahead = exit_point + down
+            column, row = int(round(ahead[0])), int(round(ahead[1]))
+            if not (0 <= row < leg_mask.shape[0] and 0 <= column < leg_mask.shape[1] and leg_mask[row, column]):
+                break
+            exit_point = ahead
+        ankle = tuple(map(float, exit_point - ANKLE_HEIGHT * height * down))
     return {'ankle': ankle, 'knee': _band_centroid(leg_mask, bottom_row, height, KNEE_BAND),
             'confidence': confidence}
