@@ -1,0 +1,145 @@
+"""Approximate-time synchronisation of several message streams ("channels"), without ROS.
+
+A port of ROS message_filters' ApproximateTime policy (wiki "message_filters/ApproximateTime", C++
+`sync_policies/approximate_time.h`), pure Python so the skeleton fitter can use it and it can be tested without
+rclpy. Guarantees, as in ROS:
+
+* each message is used in at most one set;
+* sets never cross: on every channel the messages of successive sets have strictly increasing stamps, so no set
+  holds a message older than one of an earlier set, and set stamps strictly increase;
+* each set has the smallest spread (newest − oldest stamp) among the sets that can follow the previous one
+  contiguously (messages newer than the previous set's on every channel, the oldest of them on at least one);
+  it is published only once no message still to come can give a narrower one (each channel is assumed to
+  arrive in stamp order after the reorder window below);
+* the output depends only on the stamps, not on the arrival order: messages are held until the newest stamp
+  received is `reorder_window_ns` past theirs and then matched in stamp order, so any arrival order in which
+  every message arrives within that window (and the queues do not overflow) gives the same sets;
+* a set whose spread exceeds `max_interval_ns` is never published (its oldest message is dropped instead).
+
+Beyond ROS: channels form groups (a camera's feature topics). A group whose newest stamp is more than
+`timeout_ns` behind the input clock is silent; sets then form from the other groups ("degraded" sets, which
+name the missing groups) until it is heard again. The input clock is the newest stamp matched, not wall time,
+so a silent group is noticed only while others keep producing, and the result is deterministic in tests and
+the same when replaying a bag at any speed.
+"""
+import bisect
+import heapq
+import itertools
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class SyncedSet:
+    """One message per channel of the groups present; `stamp_ns` is the newest of their stamps (the time at
+    which all of the set's data exist)."""
+    stamp_ns: int
+    messages: dict
+    stamps_ns: dict
+    missing_groups: frozenset
+
+
+class ApproximateTimeSynchronizer:
+    """Feed messages with `add`; it returns the sets they complete. `channels`: hashable names; `groups`:
+    channel → group name (default: each channel its own group); `queue_size`: messages kept per channel;
+    `timeout_ns`: input-clock silence after which a group is left out (None: never)."""
+
+    def __init__(self, channels, queue_size=10, max_interval_ns=None, groups=None, timeout_ns=None,
+                 reorder_window_ns=0):
+        self.channels = tuple(channels)
+        self.groups = dict(groups) if groups is not None else {channel: channel for channel in self.channels}
+        self.queue_size, self.max_interval_ns = queue_size, max_interval_ns
+        self.timeout_ns, self.reorder_window_ns = timeout_ns, reorder_window_ns
+        self._channel_index = {channel: index for index, channel in enumerate(self.channels)}
+        self._queues = {channel: [] for channel in self.channels}  # [(stamp, message)] sorted by stamp
+        self._last_used_ns = {}  # channel → stamp of its message in the latest set
+        self._group_heard_ns = {}  # group → newest stamp matched
+        self._held = []  # heap of (stamp, channel index, arrival number, message) inside the reorder window
+        self._arrivals = itertools.count()
+        self._newest_ns = None  # newest stamp received
+        self._clock_ns = self._start_ns = None  # newest / first stamp matched
+
+    def add(self, channel, stamp_ns, message):
+        """Take one message; return the sets completed by it, oldest first (often none, sometimes several)."""
+        # The channel index and arrival number break stamp ties, so messages themselves are never compared.
+        heapq.heappush(self._held, (stamp_ns, self._channel_index[channel], next(self._arrivals), message))
+        self._newest_ns = stamp_ns if self._newest_ns is None else max(self._newest_ns, stamp_ns)
+        sets = []
+        while self._held and self._held[0][0] <= self._newest_ns - self.reorder_window_ns:
+            stamp, index, _, held_message = heapq.heappop(self._held)
+            self._enqueue(self.channels[index], stamp, held_message)
+            while (positions := self._search()) is not None:
+                sets.append(self._publish(positions))
+        return sets
+
+    def _enqueue(self, channel, stamp_ns, message):
+        if stamp_ns <= self._last_used_ns.get(channel, -1 << 63):
+            return  # its channel already went past it: using it would cross the sets
+        self._clock_ns = stamp_ns if self._clock_ns is None else max(self._clock_ns, stamp_ns)
+        self._start_ns = stamp_ns if self._start_ns is None else self._start_ns
+        group = self.groups[channel]
+        self._group_heard_ns[group] = max(self._group_heard_ns.get(group, stamp_ns), stamp_ns)
+        queue = self._queues[channel]
+        bisect.insort(queue, (stamp_ns, message), key=lambda entry: entry[0])
+        if len(queue) > self.queue_size:
+            del queue[0]
+
+    def _silent(self, channel):
+        """Whether the channel's group has not been heard for longer than the timeout (a group never heard
+        counts from the first stamp matched)."""
+        heard_ns = self._group_heard_ns.get(self.groups[channel], self._start_ns)
+        return self.timeout_ns is not None and self._clock_ns - heard_ns > self.timeout_ns
+
+    def _search(self):
+        """ROS's candidate search: positions {channel: queue index} of the next set, or None while undecided.
+
+        The first candidate is the queue fronts; its newest message is the pivot. The oldest front is then
+        advanced one message at a time, keeping the candidate of smallest spread, until the pivot is the oldest
+        front or the fronts have moved so far that every later candidate is wider. Rerun from the queue fronts
+        after every new message, it reaches the same state as ROS's incremental version.
+        """
+        live = list(self.channels)
+        positions = dict.fromkeys(live, 0)
+        candidate = None
+        while True:
+            exhausted = [channel for channel in live if positions[channel] == len(self._queues[channel])]
+            silent = [channel for channel in exhausted if self._silent(channel)]
+            if silent and candidate is not None:
+                return candidate  # a later candidate would need a message the silent channel will not send
+            if exhausted and not silent:
+                return None  # wait for messages
+            if silent:  # no candidate yet, so all positions are 0: leave the silent groups out
+                silent_groups = {self.groups[channel] for channel in silent}
+                for channel in live:
+                    if self.groups[channel] in silent_groups:
+                        self._queues[channel].clear()  # an incomplete group's leftovers can never be used
+                live = [channel for channel in live if self.groups[channel] not in silent_groups]
+                positions = dict.fromkeys(live, 0)
+                if not live:
+                    return None
+                continue
+            fronts = {channel: self._queues[channel][positions[channel]][0] for channel in live}
+            start, end = min(live, key=fronts.get), max(live, key=fronts.get)
+            if candidate is None:
+                if self.max_interval_ns is not None and fronts[end] - fronts[start] > self.max_interval_ns:
+                    del self._queues[start][0]
+                    continue
+                candidate, pivot, pivot_ns = dict(positions), end, fronts[end]
+                candidate_start_ns, candidate_end_ns = fronts[start], fronts[end]
+            elif fronts[end] - candidate_end_ns < fronts[start] - candidate_start_ns:  # narrower
+                candidate = dict(positions)
+                candidate_start_ns, candidate_end_ns = fronts[start], fronts[end]
+            positions[start] += 1
+            # Later candidates keep the pivot and a front at least as new as `end`: if that alone is wider than
+            # the candidate, none can beat it.
+            if start == pivot or fronts[end] - pivot_ns >= candidate_end_ns - candidate_start_ns:
+                return candidate
+
+    def _publish(self, positions):
+        """Take the set out of the queues, with every older message (a narrower set superseded them)."""
+        messages, stamps_ns = {}, {}
+        for channel, position in positions.items():
+            stamps_ns[channel], messages[channel] = self._queues[channel][position]
+            del self._queues[channel][:position + 1]
+            self._last_used_ns[channel] = stamps_ns[channel]
+        missing = frozenset(self.groups.values()) - {self.groups[channel] for channel in positions}
+        return SyncedSet(max(stamps_ns.values()), messages, stamps_ns, missing)
