@@ -7,6 +7,7 @@ PACKAGE = 'mvpose_nodes'
 # Every node and tool is a console script in lib/mvpose_nodes, where `ros2 run` finds it.
 EXECUTABLES = {
     'camera_features': 'mvpose_nodes.camera_features_node:main',
+    'skeleton_fitter': 'mvpose_nodes.skeleton_fitter_node:main',
     'bag': 'mvpose_nodes.bag_cli:main',
     'topic': 'mvpose_nodes.topic_cli:main',
     'launch': 'mvpose_nodes.launcher:main',

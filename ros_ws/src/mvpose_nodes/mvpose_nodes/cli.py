@@ -29,6 +29,8 @@ ROUTED_TOOLS = {
     'import-i3dpost': ('mvpose_nodes.import_cli', 'turn i3DPost dataset frames and calibration into a bag'),
     'features': ('mvpose_nodes.features_cli', 'evaluate or benchmark the camera-feature pipeline on a bag'),
     'skin': ('mvpose_nodes.skin_cli', 'train the skin colour model'),
+    'fit': ('mvpose_nodes.fit_cli', 'fit the skeleton to a camera bag offline and record it'),
+    'eval': ('mvpose_nodes.fit_cli', 'fitted skeleton against ground truth: paper 000 Table 2 layout'),
 }
 
 
@@ -73,7 +75,8 @@ def main(argv=None):
     with exit_on_user_error(f'./mvpose {command}'):
         if command in ROUTED_TOOLS:
             module = importlib.import_module(ROUTED_TOOLS[command][0])
-            return module.main(rest, prog=f'./mvpose {command}')
+            entry = getattr(module, f'{command}_main', None) or module.main
+            return entry(rest, prog=f'./mvpose {command}')
         if command == 'test':
             os.chdir(repository_root())
             # The whole suite unless the user names tests (paths or node ids) to run.

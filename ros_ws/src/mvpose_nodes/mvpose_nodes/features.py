@@ -83,6 +83,7 @@ class Features:
     ellipses: list = field(default_factory=list)
     keypoints: dict = field(default_factory=dict)   # name -> Keypoint, every KEYPOINT_NAMES entry
     contour: ContourLabels = None
+    frontness: float = 0.0                           # share of the head that is skin: 1 = the face is seen
     timings: dict = field(default_factory=dict)      # stage -> seconds
 
 
@@ -139,12 +140,12 @@ class FeatureExtractor:
         skin[y0:y1, x0:x1] = skin_crop
         regions = skin_regions(skin_crop, min_area=min_skin)
         lap('skin')
-        ellipses, keypoints, hand_masks = self._interpret(regions, person, points, skin_crop)
+        ellipses, keypoints, hand_masks, frontness = self._interpret(regions, person, points, skin_crop)
         lap('ellipses')
         contour = label_contour(person, {n: (k.x, k.y) if k.visible else None for n, k in keypoints.items()},
                                 hand_masks)
         lap('contour')
-        features = Features(True, silhouette, skin, ellipses, keypoints, contour, timings)
+        features = Features(True, silhouette, skin, ellipses, keypoints, contour, frontness, timings)
         return _shifted(features, x0, y0)
 
     def _foreground(self, rgb, window):
@@ -191,7 +192,7 @@ class FeatureExtractor:
         front = self._head(face, keypoints, silhouette, points, skin, stature)
         hand_masks = self._hands([e for e in ellipses if e is not face], keypoints, front, skin)
         self._legs(points, keypoints, front)
-        return [e for _, e in ellipses], keypoints, hand_masks
+        return [e for _, e in ellipses], keypoints, hand_masks, front
 
     @staticmethod
     def _face(ellipses, points):

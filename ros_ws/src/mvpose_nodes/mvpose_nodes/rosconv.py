@@ -7,7 +7,7 @@ ValueError with a one-line reason, for the caller to log with the topic's name.
 import cv2
 import numpy as np
 from geometry_msgs.msg import Pose, PoseStamped
-from mvpose_msgs.msg import Keypoint2D, LabelledContour, Skeleton, SkinEllipse, SkinEllipseArray
+from mvpose_msgs.msg import FitStage, Keypoint2D, LabelledContour, Skeleton, SkinEllipse, SkinEllipseArray
 from sensor_msgs.msg import CameraInfo, CompressedImage, Image
 
 from mvpose_nodes.body_model import JOINT_NAMES, joint_orientations
@@ -148,7 +148,8 @@ def feature_messages(features, header, status_message=''):
     silhouette = mono_image(features.silhouette.astype(np.uint8) * 255, header)
     status = SkinEllipseArray.STATUS_OK if features.person else SkinEllipseArray.STATUS_NO_PERSON
     message = status_message or ('' if features.person else 'no person in the image')
-    ellipses = SkinEllipseArray(header=header, status=status, status_message=message)
+    ellipses = SkinEllipseArray(header=header, status=status, status_message=message,
+                                face_visibility=float(features.frontness))
     for e in features.ellipses:
         ellipses.ellipses.append(SkinEllipse(
             center_x=float(e.center[0]), center_y=float(e.center[1]), semi_major=float(e.semi_major),
@@ -180,3 +181,51 @@ def rgb_image(rgb, header):
     """sensor_msgs/Image rgb8 of an RGB uint8 (H, W, 3) array."""
     return Image(header=header, height=rgb.shape[0], width=rgb.shape[1], encoding='rgb8', is_bigendian=0,
                  step=3 * rgb.shape[1], data=np.ascontiguousarray(rgb).tobytes())
+
+
+def stage_messages(stages):
+    """FitStage messages of fitter.StageResult objects."""
+    return [FitStage(name=s.name, cost=float(s.cost), evaluations=int(s.evaluations), cameras=list(s.cameras),
+                     fitted=bool(s.fitted)) for s in stages]
+
+
+def contour_from_message(message):
+    """contour.ContourLabels of a LabelledContour message (no landmarks)."""
+    from mvpose_nodes.contour import ContourLabels
+    if not (len(message.x) == len(message.y) == len(message.labels) == len(message.sides)):
+        raise ValueError('LabelledContour x, y, labels and sides differ in length')
+    points = np.column_stack([np.asarray(message.x, np.int32), np.asarray(message.y, np.int32)]).reshape(-1, 2)
+    return ContourLabels(points, np.frombuffer(bytes(message.labels), np.uint8),
+                         np.frombuffer(bytes(message.sides), np.uint8), {})
+
+
+def keypoints_from_messages(*messages):
+    """{name: (x, y, confidence)} of the visible keypoints of SkinEllipseArray / LabelledContour messages."""
+    return {k.name: (k.x, k.y, k.confidence) for m in messages for k in m.keypoints if k.visible}
+
+
+def joint_state(parameters, header):
+    from sensor_msgs.msg import JointState
+    from mvpose_nodes.body_model import PARAMETER_NAMES
+    return JointState(header=header, name=list(PARAMETER_NAMES), position=[float(v) for v in parameters])
+
+
+def skeleton_markers(joints, header, status):
+    """visualization_msgs/MarkerArray of a skeleton: a sphere per joint and a line per bone, in `world`."""
+    from geometry_msgs.msg import Point
+    from visualization_msgs.msg import Marker, MarkerArray
+    from mvpose_nodes.body_model import BONES
+    colour = {Skeleton.STATUS_OK: (0.2, 0.9, 0.2), Skeleton.STATUS_INITIALISING: (0.2, 0.6, 1.0),
+              Skeleton.STATUS_DEGRADED: (1.0, 0.7, 0.1)}.get(status, (1.0, 0.2, 0.2))
+    spheres = Marker(header=header, ns='mvpose_joints', id=0, type=Marker.SPHERE_LIST, action=Marker.ADD)
+    lines = Marker(header=header, ns='mvpose_bones', id=1, type=Marker.LINE_LIST, action=Marker.ADD)
+    spheres.scale.x = spheres.scale.y = spheres.scale.z = 0.06
+    lines.scale.x = 0.02
+    for marker in (spheres, lines):
+        marker.pose.orientation.w = 1.0
+        marker.color.r, marker.color.g, marker.color.b = colour
+        marker.color.a = 1.0
+    spheres.points = [Point(x=float(p[0]), y=float(p[1]), z=float(p[2])) for p in joints]
+    index = {name: i for i, name in enumerate(JOINT_NAMES)}
+    lines.points = [spheres.points[index[name]] for bone in BONES for name in bone]
+    return MarkerArray(markers=[spheres, lines])
