@@ -56,6 +56,8 @@ class Camera:
 
     def distort(self, normalized):
         """Ideal normalised coordinates (N, 2) -> distorted ones (plumb_bob)."""
+        if not self.D.any():
+            return normalized
         k1, k2, p1, p2, k3 = self.D
         x, y = normalized[:, 0], normalized[:, 1]
         r2 = x * x + y * y

@@ -27,7 +27,7 @@ from scipy.optimize import minimize
 from mvpose_nodes.features import FRONT_SKIN_FRACTION
 from mvpose_nodes.body_model import (LABEL_HEAD, LABEL_LEFT_LEG, LABEL_RIGHT_LEG, LABEL_TORSO, PARAMETER_NAMES,
                                      STAGE_NAMES)
-from mvpose_nodes.kinematics import BONES, J, P, bone_lengths, forward_kinematics, inverse_kinematics
+from mvpose_nodes.kinematics import BONE_INDEX, BONES, J, P, bone_lengths, forward_kinematics, inverse_kinematics
 from mvpose_nodes.objective import limb_cost
 from mvpose_nodes.triangulation import best_assignment, triangulate
 
@@ -36,16 +36,18 @@ BOUNDARY_WEIGHT = 0.1    # per pixel of Eq. 4 (a sum over N = 100 points), again
 KEYPOINT_WEIGHT = 20.0   # a pixel of keypoint error costs as much as 20 px of summed boundary distance (N = 100)
 KEYPOINT_SCALE = 30.0    # [px] keypoint errors e cost KEYPOINT_SCALE·log(1 + e/KEYPOINT_SCALE): about e when small,
                          # growing ever slower when large, so a wrong detection pulls little but always leads back
-SIMPLEX_TOLERANCE = 2e-3  # [m or rad] stop when the simplex is this small
+SIMPLEX_TOLERANCE = 5e-3  # [m or rad] stop when the simplex is this small (5 mm, 0.3°)
 STEP = {'position': 0.05, 'angle': 0.15}  # initial simplex sizes [m], [rad]
 MAX_EVALUATIONS_PER_PARAMETER = 150
 TIME_JUMP = 0.5          # [s] a larger gap (or going back in time) re-initialises
 ANKLE_HEIGHT = 0.039     # of the stature (the template's ankle)
 LENGTH_TRUST = 0.35      # measured bone lengths within this share of the template's are believed
 SMOOTHNESS_WEIGHT = 20.0  # cost of moving a parameter by one STEP from the previous frame's value (squared)
-HINGE_LIMITS = {'left_shin_rx': (-2.6, 0.05), 'right_shin_rx': (-2.6, 0.05),     # knees bend backwards,
-                'left_forearm_rx': (-0.05, 2.6), 'right_forearm_rx': (-0.05, 2.6)}  # elbows forwards [rad]
-LIMIT_WEIGHT = 1e4        # per rad² beyond a hinge limit
+JOINT_LIMITS = {'left_shin_rx': (-2.6, 0.05), 'right_shin_rx': (-2.6, 0.05),     # knees bend backwards,
+                'left_forearm_rx': (-0.05, 2.6), 'right_forearm_rx': (-0.05, 2.6),  # elbows forwards [rad];
+                # the clavicles move little, and no keypoint sees the shoulders: keep them near the rest
+                **{f'{side}_clavicle_{axis}': (-0.5, 0.5) for side in ('left', 'right') for axis in ('ry', 'rz')}}
+LIMIT_WEIGHT = 1e4        # per rad² beyond a joint limit
 KEYPOINT_JOINT = {'root': 'pelvis'}   # 2D keypoint name -> the joint it locates
 
 STAGE_PARAMETERS = {
@@ -249,14 +251,14 @@ class SkeletonFitter:
         trial = parameters.copy()
         cameras_used = set()
 
-        limits = [(i, HINGE_LIMITS[name]) for i, name in zip(range(len(indices)), STAGE_PARAMETERS[stage])
-                  if name in HINGE_LIMITS]
+        limits = [(i, JOINT_LIMITS[name]) for i, name in zip(range(len(indices)), STAGE_PARAMETERS[stage])
+                  if name in JOINT_LIMITS]
 
         def cost(values):
             trial[indices] = values
             total, used = self.stage_cost(stage, trial, views)
             cameras_used.update(used)
-            # Priors: the pose changes little between frames at 25 fps, and hinges bend one way only.
+            # Priors: the pose changes little between frames at 25 fps, and joints have limits.
             total += SMOOTHNESS_WEIGHT * np.sum(((values - start) / steps) ** 2)
             for i, (low, high) in limits:
                 total += LIMIT_WEIGHT * (max(low - values[i], 0.0) + max(values[i] - high, 0.0)) ** 2
@@ -283,24 +285,24 @@ class SkeletonFitter:
     def stage_cost(self, stage, parameters, views):
         """The stage's objective (module docstring) and the indices of the views that contributed."""
         joints, _ = forward_kinematics(parameters, self.lengths)
+        projections = [view.camera.project(joints) for view in views]  # every joint, once per camera
         total, used = 0.0, set()
         for bone_name, label in STAGE_BONES[stage]:
-            bone = BONES[[b.name for b in BONES].index(bone_name)]
-            segments, maps = [], []
-            for view in views:
-                ends, depth = view.camera.project(joints[[J[bone.parent_joint], J[bone.joint]]])
-                segments.append((ends[0], ends[1]) if np.all(depth > 0) and view.distances is not None else None)
-                maps.append(view.distances)
-            cost, cameras = limb_cost(segments, maps, label, enclosure_weight=ENCLOSURE_WEIGHT)
+            bone = BONES[BONE_INDEX[bone_name]]
+            ends = (J[bone.parent_joint], J[bone.joint])
+            segments = [(pixels[ends[0]], pixels[ends[1]]) if depth[list(ends)].min() > 0 and view.distances else None
+                        for view, (pixels, depth) in zip(views, projections)]
+            cost, cameras = limb_cost(segments, [view.distances for view in views], label,
+                                      enclosure_weight=ENCLOSURE_WEIGHT)
             total += BOUNDARY_WEIGHT * cost
             used.update(cameras)
-        for index, view in enumerate(views):
+        for index, (view, (pixels, _)) in enumerate(zip(views, projections)):
             names = [n for n in STAGE_KEYPOINTS[stage] if n in view.keypoints]
             if not names:
                 continue
-            projected, _ = view.camera.project(joints[[J[KEYPOINT_JOINT.get(n, n)] for n in names]])
-            for name, point in zip(names, projected):
+            for name in names:
                 x, y, confidence = view.keypoints[name]
+                point = pixels[J[KEYPOINT_JOINT.get(name, name)]]
                 error = np.hypot(point[0] - x, point[1] - y)
                 total += KEYPOINT_WEIGHT * confidence * KEYPOINT_SCALE * np.log1p(error / KEYPOINT_SCALE)
             used.add(index)

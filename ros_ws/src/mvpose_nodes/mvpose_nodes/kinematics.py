@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from mvpose_nodes.body_model import JOINT_NAMES, PARAMETER_NAMES
-from mvpose_nodes.geometry import normalize, quaternion_from_matrix, rotation_between
+from mvpose_nodes.geometry import matrix_from_quaternion, normalize, quaternion_from_matrix, rotation_between
 
 J = {name: i for i, name in enumerate(JOINT_NAMES)}
 P = {name: i for i, name in enumerate(PARAMETER_NAMES)}
@@ -116,6 +116,25 @@ def torso_rotation(joints):
     return np.column_stack([right, np.cross(up, right), up])
 
 
+# The limbs whose child is a hinge: (the child's end joint, the side of local Y it bends to).
+HINGE_CHILD = {'left_thigh': ('left_ankle', -1), 'right_thigh': ('right_ankle', -1),    # knees bend back
+               'left_upper_arm': ('left_wrist', 1), 'right_upper_arm': ('right_wrist', 1)}  # elbows forwards
+
+
+def hinge_twist(local, parent, joints, end, bend_sign):
+    """Rotation about a limb's own axis (its local Z) that brings the hinge child's end into the limb's
+    local Y–Z plane, on the side the hinge bends to. The limb's direction fixes all but this twist, which
+    only the child shows (a straight child leaves it at zero)."""
+    frame = parent @ local
+    start = {'left_ankle': 'left_knee', 'right_ankle': 'right_knee', 'left_wrist': 'left_elbow',
+             'right_wrist': 'right_elbow'}[end]
+    child = frame.T @ (joints[J[end]] - joints[J[start]])
+    if np.hypot(child[0], child[1]) < 1e-9 * max(np.linalg.norm(child), 1e-12):
+        return np.eye(3)
+    twist = np.arctan2(-child[0] * bend_sign, child[1] * bend_sign)
+    return euler_matrix(0.0, 0.0, twist)
+
+
 def inverse_kinematics(joints):
     """The 29 parameters whose forward kinematics best reproduce joints (15, 3) [m] (paper 004).
 
@@ -124,7 +143,9 @@ def inverse_kinematics(joints):
     rotation of paper 004 — axis n = nor(r × r'), cos φ = r·r' / (|r||r'|), quaternion, then ZYX
     Euler angles — instead of the older method's constraint that one Euler angle is zero. Parts
     with fewer DOF take the exact angles they have: a clavicle (RY, RZ) reaches any direction; a
-    hinge (RX) takes the signed angle of r' about the parent's X axis."""
+    hinge (RX) takes the signed angle of r' about the parent's X axis. A limb whose child is a hinge
+    (thigh, upper arm) is also turned about its own axis so that the hinge bends the child where it is
+    (hinge_twist): bone vectors alone leave that twist open."""
     joints = np.asarray(joints, dtype=float)
     parameters = np.zeros(len(PARAMETER_NAMES))
     parameters[[P['torso_x'], P['torso_y'], P['torso_z']]] = joints[J['pelvis']]
@@ -147,7 +168,10 @@ def inverse_kinematics(joints):
             local = euler_matrix(0.0, ry, rz)
             parameters[[P[bone.angles[1]], P[bone.angles[2]]]] = ry, rz
         else:
-            rx, ry, rz = euler_from_quaternion(rotation_between(bone.rest, measured))
+            local = matrix_from_quaternion(rotation_between(bone.rest, measured))
+            if bone.name in HINGE_CHILD:
+                local = local @ hinge_twist(local, parent, joints, *HINGE_CHILD[bone.name])
+            rx, ry, rz = euler_from_quaternion(quaternion_from_matrix(local))
             local = euler_matrix(rx, ry, rz)
             parameters[[P[name] for name in bone.angles]] = rx, ry, rz
         frames[bone.name] = parent @ local
