@@ -63,7 +63,8 @@ def test_eval_prints_table_2_for_a_known_offset(tmp_path):
 
 def test_skeleton_fitter_node_in_the_graph(tmp_path, background):
     bag = tmp_path / 'walk'
-    run_mvpose('synth', '--cameras', 3, 5, '--frames', '70-72', '--resolution', '960x540', '-o', bag, timeout=300)
+    # Five frames: the first may reach the fitter before the calibration does (other topics), and is then skipped.
+    run_mvpose('synth', '--cameras', 3, 5, '--frames', '70-74', '--resolution', '960x540', '-o', bag, timeout=300)
     for k in (3, 5):
         background('run', 'camera_features', '--ros-args', '-r', f'__ns:=/cam{k}')
     fitter = background('run', 'skeleton_fitter', '--ros-args', '-p', 'cameras:=[3, 5]')
@@ -75,7 +76,8 @@ def test_skeleton_fitter_node_in_the_graph(tmp_path, background):
     assert code == 0, err
     skeletons = [d for d in yaml.safe_load_all(out) if d]
     assert len(skeletons) == 3
-    assert [s['header']['stamp']['nanosec'] for s in skeletons] == [800_000_000, 840_000_000, 880_000_000]
+    stamps = [s['header']['stamp']['nanosec'] for s in skeletons]
+    assert stamps == sorted(stamps) and set(stamps) <= {800_000_000 + 40_000_000 * i for i in range(5)}
     for skeleton in skeletons:
         assert skeleton['joint_names'] == list(JOINT_NAMES) and len(skeleton['parameters']) == 29
         assert [stage['name'] for stage in skeleton['stages']][0] == 'torso'
