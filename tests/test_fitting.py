@@ -20,8 +20,8 @@ KEYPOINTS = ('root', 'neck', 'head', 'left_wrist', 'right_wrist', 'left_elbow', 
 def test_exact_keypoints_give_the_walk_back():
     """With keypoints projected from the true joints (and no contour), the fit follows the walk to within
     the body model's reach: the template's hips and shoulders are not the mocap subject's, and no
-    keypoint sees them (measured: about 50 mm mean, 100–180 mm at the shoulders, < 40 mm at the
-    head and wrists; the left leg drifts over the last frames, the fitter's known weakness)."""
+    keypoint sees them, nor how long the subject's bones are (measured: about 30 mm mean, under 40 mm
+    at the head, wrists and ankles)."""
     motion = retarget(load_bvh(cmu_clip('07_01'))).placed()
     cameras = studio_rig(cameras=[3, 5, 7])
     fitter, errors = SkeletonFitter(), []
@@ -37,8 +37,8 @@ def test_exact_keypoints_give_the_walk_back():
         assert [s.name for s in fit.stages] == ['torso', 'head_neck', 'left_arm', 'right_arm', 'left_leg',
                                                 'right_leg']
     errors = np.array(errors) * 1000
-    assert errors.mean() < 65, errors.mean(axis=0).round()
-    for name in ('head', 'left_wrist', 'right_wrist'):
+    assert errors.mean() < 45, errors.mean(axis=0).round()
+    for name in ('head', 'left_wrist', 'right_wrist', 'left_ankle', 'right_ankle'):
         assert errors[:, JOINT_NAMES.index(name)].mean() < 40, name
 
 

@@ -66,10 +66,9 @@ STAGE_BONES = {  # bones with labelled boundaries: (bone, part label)
     'right_leg': (('right_thigh', LABEL_RIGHT_LEG), ('right_shin', LABEL_RIGHT_LEG)),
 }
 STAGE_KEYPOINTS = {
-    # The torso carries the limbs (their angles are relative to it): all keypoints hold its twist
-    # about the spine, which root and neck alone leave free.
-    'torso': ('root', 'neck', 'head', 'left_elbow', 'right_elbow', 'left_wrist', 'right_wrist', 'left_knee',
-              'right_knee', 'left_ankle', 'right_ankle'),
+    # Only the torso's own keypoints: with the limbs' keypoints too, the torso would turn to explain
+    # the limbs' motion since the last frame (their angles are still the last frame's), and drift.
+    'torso': ('root', 'neck', 'head'),
     'head_neck': ('head',), 'left_arm': ('left_elbow', 'left_wrist'),
     'right_arm': ('right_elbow', 'right_wrist'), 'left_leg': ('left_knee', 'left_ankle'),
     'right_leg': ('right_knee', 'right_ankle'),
@@ -125,9 +124,38 @@ class SkeletonFitter:
                 raise ValueError('too few views with keypoints to initialise (need root, neck and head in 2 views)')
             self.parameters, initialised = start, True
         parameters = self.parameters.copy()
-        oriented = [self.oriented_view(view, parameters) for view in views]
+        # Paper 000 Sec. 5.3: local minima are avoided by starting from the previous frame's pose or
+        # from the frame's own features; each stage starts from whichever of the two fits better.
+        found = None if initialised else self.triangulated_joints(views)
+        reference, _ = forward_kinematics(parameters, self.lengths)
+        if found is not None:
+            # Which triangulated limb is left: the one nearer the previous frame's left (a single
+            # frame's evidence can flip between frames; the pose moves little in 40 ms).
+            for limb in ('knee', 'ankle', 'elbow', 'wrist'):
+                left, right = f'left_{limb}', f'right_{limb}'
+                if left in found and right in found:
+                    straight = np.linalg.norm(found[left] - reference[J[left]]) + np.linalg.norm(found[right] - reference[J[right]])
+                    crossed = np.linalg.norm(found[left] - reference[J[right]]) + np.linalg.norm(found[right] - reference[J[left]])
+                    if crossed < straight:
+                        found[left], found[right] = found[right], found[left]
+            for name, position in found.items():
+                reference[J[name]] = position
+        candidate = None
+        oriented = [self.oriented_view(view, reference) for view in views]
         results = []
         for stage in STAGE_NAMES:
+            if found is not None and stage != 'torso':
+                if candidate is None:  # the limbs' triangulated joints, as angles relative to the fitted torso
+                    hybrid, _ = forward_kinematics(parameters, self.lengths)
+                    for name, position in found.items():
+                        if name not in ('pelvis', 'neck'):
+                            hybrid[J[name]] = position
+                    candidate = inverse_kinematics(hybrid)
+                indices = [P[name] for name in STAGE_PARAMETERS[stage]]
+                alternative = parameters.copy()
+                alternative[indices] = candidate[indices]
+                if self.stage_cost(stage, alternative, oriented)[0] < self.stage_cost(stage, parameters, oriented)[0]:
+                    parameters = alternative
             parameters, result = self.search(stage, parameters, oriented)
             results.append(result)
         self.parameters = parameters
@@ -136,6 +164,16 @@ class SkeletonFitter:
 
     def initial_parameters(self, views):
         """Angles from triangulated keypoints (paper 000 Sec. 3.1 and 6; paper 004), or None."""
+        joints = self.triangulated_joints(views)
+        if joints is None:
+            return None
+        if self.lengths is None:
+            self.lengths = self.person_lengths(joints)
+        return inverse_kinematics(self.completed_joints(joints))
+
+    def triangulated_joints(self, views):
+        """{joint: (3,) [m]} triangulated from the views' keypoints (left/right pairs assigned across views
+        and to the person's sides), or None without root, neck and head in two views."""
         cameras = [view.camera for view in views]
 
         def pixels(name):
@@ -158,9 +196,7 @@ class SkeletonFitter:
                 if right is not None and np.dot(left - right_point, right) > 0:  # the pair's "left" is on the right
                     left, right_point = right_point, left
                 joints[f'left_{limb}'], joints[f'right_{limb}'] = left, right_point
-        if self.lengths is None:
-            self.lengths = self.person_lengths(joints)
-        return inverse_kinematics(self.completed_joints(joints))
+        return joints
 
     @staticmethod
     def person_lengths(joints):
@@ -218,9 +254,9 @@ class SkeletonFitter:
         joints[J['right_shoulder']] = found['neck'] + self.lengths['clavicle'] * right
         return joints
 
-    def oriented_view(self, view, parameters):
-        """The view with its left/right labels of legs and arms swapped where the pose says they are."""
-        joints, _ = forward_kinematics(parameters, self.lengths)
+    def oriented_view(self, view, joints):
+        """The view with its left/right labels of legs and arms swapped where `joints` (15, 3), the
+        frame's reference pose, say they are."""
         keypoints = dict(view.keypoints)
         distances = view.distances
         for group, names in SWAPPABLE.items():
