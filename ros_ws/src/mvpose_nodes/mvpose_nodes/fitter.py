@@ -41,6 +41,7 @@ STEP = {'position': 0.05, 'angle': 0.15}  # initial simplex sizes [m], [rad]
 MAX_EVALUATIONS_PER_PARAMETER = 150
 TIME_JUMP = 0.5          # [s] a larger gap (or going back in time) re-initialises
 ANKLE_HEIGHT = 0.039     # of the stature (the template's ankle)
+OUTLIER_RMS = 12.0       # [px] a triangulation worse than this tries leaving one view out
 LENGTH_TRUST = 0.35      # measured bone lengths within this share of the template's are believed
 SMOOTHNESS_WEIGHT = 20.0  # cost of moving a parameter by one STEP from the previous frame's value (squared)
 JOINT_LIMITS = {'left_shin_rx': (-2.6, 0.05), 'right_shin_rx': (-2.6, 0.05),     # knees bend backwards,
@@ -183,19 +184,26 @@ class SkeletonFitter:
             return np.array([view.keypoints.get(name, (0, 0, 0.0))[2] for view in views], float)
         joints = {}
         for name in ('root', 'neck', 'head'):
-            found = triangulate(cameras, pixels(name), weights(name))
+            found = robust_triangulate(cameras, pixels(name), weights(name))
             if found is None:
                 return None
-            joints[KEYPOINT_JOINT.get(name, name)] = found[0]
+            joints[KEYPOINT_JOINT.get(name, name)] = found
         right = self.facing_right(views, joints)
         for limb in ('knee', 'ankle', 'elbow', 'wrist'):
-            pair = best_assignment(cameras, pixels(f'left_{limb}'), pixels(f'right_{limb}'),
-                                   np.column_stack([weights(f'left_{limb}'), weights(f'right_{limb}')]))
-            if pair is not None:
-                left, right_point = pair[0], pair[1]
-                if right is not None and np.dot(left - right_point, right) > 0:  # the pair's "left" is on the right
-                    left, right_point = right_point, left
-                joints[f'left_{limb}'], joints[f'right_{limb}'] = left, right_point
+            left_pixels, right_pixels = pixels(f'left_{limb}'), pixels(f'right_{limb}')
+            pair_weights = np.column_stack([weights(f'left_{limb}'), weights(f'right_{limb}')])
+            pair = best_assignment(cameras, left_pixels, right_pixels, pair_weights)
+            if pair is None:
+                continue
+            swaps = pair[2]
+            observed = np.where(swaps[:, None], right_pixels, left_pixels), np.where(swaps[:, None], left_pixels, right_pixels)
+            observed_weights = np.where(swaps, pair_weights[:, 1], pair_weights[:, 0]), np.where(swaps, pair_weights[:, 0], pair_weights[:, 1])
+            left, right_point = (robust_triangulate(cameras, p, w) for p, w in zip(observed, observed_weights))
+            if left is None or right_point is None:
+                continue
+            if right is not None and np.dot(left - right_point, right) > 0:  # the pair's "left" is on the right
+                left, right_point = right_point, left
+            joints[f'left_{limb}'], joints[f'right_{limb}'] = left, right_point
         return joints
 
     @staticmethod
@@ -343,6 +351,29 @@ class SkeletonFitter:
                 total += KEYPOINT_WEIGHT * confidence * KEYPOINT_SCALE * np.log1p(error / KEYPOINT_SCALE)
             used.add(index)
         return total, used
+
+
+def robust_triangulate(cameras, pixels, weights):
+    """A DLT triangulation (triangulation.triangulate) that leaves out the one view that disagrees: with
+    three or more views and an RMS reprojection error above OUTLIER_RMS, the subset without the view
+    whose removal lowers the error most is used if it brings the error under OUTLIER_RMS. (point, or None)"""
+    found = triangulate(cameras, pixels, weights)
+    if found is None:
+        return None
+    point, rms = found
+    usable = [i for i in range(len(cameras)) if np.all(np.isfinite(pixels[i])) and weights[i] > 0]
+    if rms > OUTLIER_RMS and len(usable) >= 3:
+        trials = []
+        for left_out in usable:
+            reduced = weights.copy()
+            reduced[left_out] = 0.0
+            trial = triangulate(cameras, pixels, reduced)
+            if trial is not None:
+                trials.append(trial)
+        best = min(trials, key=lambda t: t[1], default=None)
+        if best is not None and best[1] < OUTLIER_RMS:
+            point = best[0]
+    return point
 
 
 def view_from_features(camera, keypoints, contour, frontness=None):
