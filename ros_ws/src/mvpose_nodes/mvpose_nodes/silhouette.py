@@ -18,10 +18,11 @@ BLUENESS_THRESHOLD = 25   # [DN] b − max(r, g) above which a pixel is blue scr
 MIN_PERSON_AREA = 2000    # [px] at 1080p: smaller blobs are not a person (scaled with the image area)
 MAX_HOLE_FRACTION = 0.002  # holes up to this share of the person's area are keying misses, and filled
 # Anthropometric bands, as fractions of the silhouette height above its lowest pixel (person standing).
-LEG_CUT = 0.34            # legs are the silhouette below this height (below the hands, above the knees)
-ANKLE_HEIGHT = 0.045      # the ankle joint lies 4–5 % of the stature above the sole
+LEG_CUT = 0.36            # legs are the silhouette below this height (below the hands, above the knees)
+ANKLE_HEIGHT = 0.03       # the ankle joint above the lowest pixel of its foot, as a share of the stature
+                          # (4–5 % above the sole, less the sole's rise towards the camera in the image)
 SHIN_BAND = (0.06, 0.18)  # above a foot's lowest pixel: mostly the shin, whose axis leads down to the ankle
-KNEE_BAND = (0.27, 0.33)  # the knee joint lies at about 30 % of the stature
+KNEE_BAND = (0.285, 0.345)  # the knee joint lies at about 30 % of the stature
 
 
 def chroma_key_foreground(rgb, threshold=BLUENESS_THRESHOLD):
