@@ -83,3 +83,36 @@ def test_skeleton_fitter_node_in_the_graph(tmp_path, background):
         assert [stage['name'] for stage in skeleton['stages']][0] == 'torso'
     assert skeletons[0]['status'] == 1 and skeletons[1]['status'] == 0   # INITIALISING, then OK
     fitter.interrupt()
+
+
+def exact_views(cameras, truth, names=KEYPOINTS):
+    views = []
+    for camera in cameras:
+        pixels, _ = camera.project(truth)
+        views.append(View(camera, None, {n: (*pixels[JOINT_NAMES.index(KEYPOINT_JOINT.get(n, n))], 1.0) for n in names}))
+    return views
+
+
+def test_time_jump_or_reversal_reinitialises_and_missing_evidence_keeps_a_limb():
+    motion = retarget(load_bvh(cmu_clip('07_01'))).placed()
+    cameras = studio_rig(cameras=[3, 5, 7])
+    fitter = SkeletonFitter()
+    assert fitter.fit(1.00, exact_views(cameras, motion.joints[0])).initialised
+    assert not fitter.fit(1.04, exact_views(cameras, motion.joints[1])).initialised
+    assert fitter.fit(1.00, exact_views(cameras, motion.joints[2])).initialised, 'time went back'
+    assert fitter.fit(3.00, exact_views(cameras, motion.joints[3])).initialised, 'time jumped'
+    before = fitter.parameters.copy()
+    without_left_arm = [n for n in KEYPOINTS if n not in ('left_elbow', 'left_wrist')]
+    fit = fitter.fit(3.04, exact_views(cameras, motion.joints[4], without_left_arm))
+    left_arm = next(s for s in fit.stages if s.name == 'left_arm')
+    assert not left_arm.fitted and left_arm.evaluations == 0
+    from mvpose_nodes.fitter import STAGE_PARAMETERS
+    from mvpose_nodes.kinematics import P
+    indices = [P[n] for n in STAGE_PARAMETERS['left_arm']]
+    assert np.array_equal(fit.parameters[indices], before[indices]), 'the left arm keeps its angles'
+
+
+def test_too_few_views_is_a_clear_error():
+    motion = retarget(load_bvh(cmu_clip('07_01')))
+    with pytest.raises(ValueError, match='too few views'):
+        SkeletonFitter().fit(0.0, exact_views(studio_rig(cameras=[3]), motion.joints[0]))

@@ -30,6 +30,8 @@ def fit_main(argv=None, prog='fit'):
     parser.add_argument('-o', '--output', type=Path, required=True, help='bag to write /mvpose/skeleton to')
     parser.add_argument('--cameras', type=int, nargs='+', default=[3, 5, 7], metavar='K',
                         help='cameras to fit from (default 3 5 7)')
+    parser.add_argument('--profile', type=int, default=0, metavar='N',
+                        help='after fitting, print the N functions where the fitter spent most time')
     args = parser.parse_args(sys.argv[1:] if argv is None else argv)
     with exit_on_user_error(prog):
         fit_bag(args)
@@ -49,6 +51,10 @@ def fit_bag(args):
     fitter = SkeletonFitter()
     progress = Progress(count_images(args.bag, args.cameras) // len(args.cameras), 'fit')
     fit_times = []
+    profiler = None
+    if args.profile:
+        import cProfile
+        profiler = cProfile.Profile()
     with BagWriter(args.output) as out:
         out.add_topic(SKELETON_TOPIC, 'mvpose_msgs/msg/Skeleton', [STREAM_QOS])
         out.add_topic(GROUND_TRUTH_TOPIC, 'mvpose_msgs/msg/Skeleton', [STREAM_QOS])
@@ -62,10 +68,15 @@ def fit_bag(args):
                     views.append(view_from_features(frame_set.cameras[number], features.keypoints, features.contour,
                                                     features.frontness))
             try:
+                if profiler:
+                    profiler.enable()
                 fit = fitter.fit(frame_set.stamp_ns / 1e9, views)
             except ValueError as error:
                 print(f'[fit] frame {frame_set.frame}: {error}', file=sys.stderr)
                 continue
+            finally:
+                if profiler:
+                    profiler.disable()
             fit_times.append(fit.seconds)
             message = skeleton_message(fit.joints, frame_set.stamp_ns, parameter_names=list(fit_parameter_names()),
                                        parameters=fit.parameters.tolist(), stages=stage_messages(fit.stages),
@@ -76,6 +87,9 @@ def fit_bag(args):
                           frame_set.stamp_ns)
             progress.update()
     progress.close()
+    if profiler:
+        import pstats
+        pstats.Stats(profiler, stream=sys.stdout).sort_stats('cumulative').print_stats(args.profile)
     if fit_times:
         print(f'[fit] {len(fit_times)} frames; fit time per frame median {1e3 * np.median(fit_times):.0f} ms '
               f'({1 / np.median(fit_times):.1f} fits/s, features excluded) -> {args.output}', file=sys.stderr)

@@ -13,7 +13,7 @@ The nearest-boundary distances are read from Euclidean distance transforms compu
 frame (one per part label and side), so one evaluation is 2·N map look-ups per camera instead of N·K
 point distances. Pixels: x right (column), y down (row), integer coordinates at pixel centres.
 """
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
@@ -37,6 +37,7 @@ class BoundaryDistances:
     origin: tuple
     maps: dict
     widths: dict
+    _stacked: dict = field(default_factory=dict, compare=False, repr=False)  # label -> (H, W, 2) both sides
 
     def swapped(self, label_a, label_b):
         """The same maps with two part labels exchanged (a view that had the person's left and right
@@ -53,8 +54,19 @@ class BoundaryDistances:
         upper bound of the true distance, exact when the nearest boundary pixel lies straight inward from
         the box edge (the margin makes that typical), and never small for a segment far off the part.
         """
-        distance_map = self.maps[(label, side)]
-        height, width = distance_map.shape
+        return self._interpolate(self.maps[(label, side)], points)
+
+    def both_sides(self, label, points):
+        """(distances to SIDE_A, distances to SIDE_B) of points (M, 2): one interpolation of both maps."""
+        stacked = self._stacked.get(label)
+        if stacked is None:
+            stacked = self._stacked[label] = np.dstack([self.maps[(label, SIDE_A)], self.maps[(label, SIDE_B)]])
+        both = self._interpolate(stacked, points)
+        return both[:, 0], both[:, 1]
+
+    def _interpolate(self, distance_map, points):
+        """Bilinear look-up of an (H, W) or (H, W, K) map at points (M, 2), plus the distance outside the box."""
+        height, width = distance_map.shape[:2]
         local = np.asarray(points, dtype=float) - self.origin
         clamped = np.clip(local, 0, (width - 1, height - 1))
         outside = np.hypot(*(local - clamped).T)
@@ -63,6 +75,8 @@ class BoundaryDistances:
         fx, fy = (clamped - corner).T
         x, y = corner.T
         x1, y1 = np.minimum(x + 1, width - 1), np.minimum(y + 1, height - 1)
+        if distance_map.ndim == 3:
+            fx, fy, outside = fx[:, None], fy[:, None], outside[:, None]
         top = distance_map[y, x] * (1 - fx) + distance_map[y, x1] * fx
         bottom = distance_map[y1, x] * (1 - fx) + distance_map[y1, x1] * fx
         return top * (1 - fy) + bottom * fy + outside
@@ -132,8 +146,7 @@ def limb_cost(segments, distances, label, n=SEGMENT_POINTS, enclosure_weight=0.0
         if segment is None or label not in maps.widths:
             continue
         points = segment_points(*segment, n)
-        cost += _camera_cost(maps.distances(label, SIDE_A, points), maps.distances(label, SIDE_B, points),
-                             maps.widths[label], enclosure_weight)
+        cost += _camera_cost(*maps.both_sides(label, points), maps.widths[label], enclosure_weight)
         cameras_used.append(camera)
     return cost, cameras_used
 
