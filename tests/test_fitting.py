@@ -61,7 +61,23 @@ def test_eval_prints_table_2_for_a_known_offset(tmp_path):
     assert '5 frames matched' in table
 
 
-def test_skeleton_fitter_node_in_the_graph(tmp_path, background):
+def wait_for_graph(topics_with_both_ends, timeout=60):
+    """Until every topic has a publisher and a subscriber in the graph, then a moment for them to match:
+    the player waits for its own subscribers only, not for the nodes downstream of them."""
+    import time
+    import rclpy
+    node = rclpy.create_node('graph_watcher')
+    try:
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline and not all(
+                node.count_publishers(t) and node.count_subscribers(t) for t in topics_with_both_ends):
+            rclpy.spin_once(node, timeout_sec=0.1)
+        time.sleep(1.0)
+    finally:
+        node.destroy_node()
+
+
+def test_skeleton_fitter_node_in_the_graph(tmp_path, background, ros_context):
     bag = tmp_path / 'walk'
     # Five frames: the first may reach the fitter before the calibration does (other topics), and is then skipped.
     run_mvpose('synth', '--cameras', 3, 5, '--frames', '70-74', '--resolution', '960x540', '-o', bag, timeout=300)
@@ -69,6 +85,8 @@ def test_skeleton_fitter_node_in_the_graph(tmp_path, background):
         background('run', 'camera_features', '--ros-args', '-r', f'__ns:=/cam{k}')
     fitter = background('run', 'skeleton_fitter', '--ros-args', '-p', 'cameras:=[3, 5]')
     echo = background('topic', 'echo', '/mvpose/skeleton', '--count', 3, '--timeout', 120)
+    wait_for_graph([f'/cam{k}/{name}' for k in (3, 5) for name in ('silhouette', 'skin_ellipses', 'labelled_contour')]
+                   + ['/mvpose/skeleton'])
     run_mvpose('bag', 'play', bag, '--topics', '/cam3/image_raw/compressed', '/cam5/image_raw/compressed',
                '/cam3/camera_info', '/cam5/camera_info', '/cam3/camera_pose', '/cam5/camera_pose',
                '--wait-for-subscribers', '--delay', 1.0, '--rate', 0.2, timeout=180)

@@ -41,6 +41,7 @@ def fit_main(argv=None, prog='fit'):
 def fit_bag(args):
     from rclpy.serialization import serialize_message
     from mvpose_nodes.bagfile import BagWriter
+    from mvpose_nodes.body_model import PARAMETER_NAMES
     from mvpose_nodes.camera_bag import GROUND_TRUTH_TOPIC, SKELETON_TOPIC, STREAM_QOS, frame_sets
     from mvpose_nodes.features_cli import count_images, make_extractor
     from mvpose_nodes.fitter import SkeletonFitter, view_from_features
@@ -78,7 +79,7 @@ def fit_bag(args):
                 if profiler:
                     profiler.disable()
             fit_times.append(fit.seconds)
-            message = skeleton_message(fit.joints, frame_set.stamp_ns, parameter_names=list(fit_parameter_names()),
+            message = skeleton_message(fit.joints, frame_set.stamp_ns, parameter_names=list(PARAMETER_NAMES),
                                        parameters=fit.parameters.tolist(), stages=stage_messages(fit.stages),
                                        status=1 if fit.initialised else 0, fit_time=fit.seconds)
             out.write(SKELETON_TOPIC, serialize_message(message), frame_set.stamp_ns)
@@ -93,11 +94,6 @@ def fit_bag(args):
     if fit_times:
         print(f'[fit] {len(fit_times)} frames; fit time per frame median {1e3 * np.median(fit_times):.0f} ms '
               f'({1 / np.median(fit_times):.1f} fits/s, features excluded) -> {args.output}', file=sys.stderr)
-
-
-def fit_parameter_names():
-    from mvpose_nodes.body_model import PARAMETER_NAMES
-    return PARAMETER_NAMES
 
 
 def eval_main(argv=None, prog='eval'):

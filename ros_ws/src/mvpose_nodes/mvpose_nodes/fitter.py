@@ -281,8 +281,11 @@ class SkeletonFitter:
             if crossed < straight:
                 for name in names:
                     left, right = f'left_{name}', f'right_{name}'
-                    keypoints[left], keypoints[right] = view.keypoints.get(right), view.keypoints.get(left)
-                    keypoints = {k: v for k, v in keypoints.items() if v is not None}
+                    for mine, other in ((left, right), (right, left)):
+                        if other in view.keypoints:
+                            keypoints[mine] = view.keypoints[other]
+                        else:
+                            keypoints.pop(mine, None)
                 if group == 'legs' and distances is not None:
                     distances = distances.swapped(LABEL_LEFT_LEG, LABEL_RIGHT_LEG)
         return View(view.camera, distances, keypoints, view.frontness)
