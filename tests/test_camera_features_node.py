@@ -5,7 +5,7 @@ import time
 import numpy as np
 import pytest
 import rclpy
-from conftest import Background, assert_one_line_error, run_mvpose
+from conftest import assert_one_line_error, run_mvpose
 from mvpose_msgs.msg import LabelledContour, SkinEllipseArray
 from rclpy.qos import DurabilityPolicy, QoSProfile
 from sensor_msgs.msg import CameraInfo, Image

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import rclpy
 import yaml
-from conftest import Background, assert_one_line_error, run_mvpose
+from conftest import assert_one_line_error, run_mvpose
 from mvpose_msgs.msg import Skeleton
 from samples import sample_skeleton
 

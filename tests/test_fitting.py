@@ -3,7 +3,7 @@ skeleton_fitter node in the real graph over DDS."""
 import numpy as np
 import pytest
 import yaml
-from conftest import Background, run_mvpose
+from conftest import run_mvpose
 from rclpy.serialization import serialize_message
 
 from mvpose_nodes.bagfile import BagWriter

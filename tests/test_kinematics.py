@@ -3,7 +3,7 @@ method (and the older constrained method shown worse)."""
 import numpy as np
 import pytest
 
-from mvpose_nodes.body_model import JOINT_NAMES, PARAMETER_NAMES
+from mvpose_nodes.body_model import PARAMETER_NAMES
 from mvpose_nodes.geometry import quaternion_from_matrix, rotation_between
 from mvpose_nodes.kinematics import (BONES, J, P, bone_lengths, constrained_euler, euler_from_quaternion,
                                      euler_matrix, forward_kinematics, inverse_kinematics)

@@ -4,7 +4,6 @@ The bags are ordinary rosbag2 bags (see bagfile.py): `ros2 bag info/play` of a
 system ROS 2 install and the `rosbags` library read what `bag record` writes,
 and `bag play` plays what `ros2 bag record -s mcap` wrote.
 """
-import argparse
 import datetime
 import sys
 import time

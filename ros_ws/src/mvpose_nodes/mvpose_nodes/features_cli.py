@@ -62,7 +62,7 @@ def evaluate(args, extractor):
     from mvpose_nodes.errors import UserError
     from mvpose_nodes.features import KEYPOINT_NAMES, contour_label_agreement
     from mvpose_nodes.progress import Progress
-    from mvpose_nodes.skin import f1_score
+    from mvpose_nodes.skin import mask_counts
     from mvpose_nodes.studio import SKIN_BIT
 
     ious, skin_counts, agreements, no_person = [], np.zeros(3), [], 0
@@ -85,7 +85,7 @@ def evaluate(args, extractor):
             truth_person = labels > 0
             ious.append(np.logical_and(features.silhouette, truth_person).sum()
                         / max(1, np.logical_or(features.silhouette, truth_person).sum()))
-            skin_counts += [np.logical_and(features.skin, truth_skin).sum(), features.skin.sum(), truth_skin.sum()]
+            skin_counts += mask_counts(features.skin, truth_skin)
             if not features.person:
                 no_person += 1
                 continue
@@ -139,9 +139,8 @@ def count_images(bag_path, cameras):
 
 
 def report(bag, images, no_person, ious, skin_counts, errors, offsets, matched, swaps, agreements):
-    true_positive, predicted, actual = skin_counts
-    precision, recall = true_positive / max(predicted, 1), true_positive / max(actual, 1)
-    f1 = 2 * precision * recall / max(precision + recall, 1e-12)
+    from mvpose_nodes.skin import scores_of_counts
+    precision, recall, f1 = scores_of_counts(*skin_counts)
     mean_iou = float(np.mean(ious)) if ious else 0.0
 
     def verdict(ok):

@@ -226,13 +226,21 @@ def skin_regions(mask, min_area=30):
     return sorted(regions, key=lambda region: -region.area)
 
 
+def mask_counts(predicted, truth):
+    """(true positives, predicted, true) pixel counts of two bool masks of the same shape."""
+    if predicted.shape != truth.shape:
+        raise ValueError(f'mask shapes differ: {predicted.shape} vs {truth.shape}')
+    return np.count_nonzero(predicted & truth), np.count_nonzero(predicted), np.count_nonzero(truth)
+
+
 def f1_score(predicted, truth):
     """(precision, recall, F1) of a bool predicted mask against a bool truth mask of the same
     shape; each is 0.0 where its denominator is 0."""
-    if predicted.shape != truth.shape:
-        raise ValueError(f'mask shapes differ: {predicted.shape} vs {truth.shape}')
-    true_positives = np.count_nonzero(predicted & truth)
-    predicted_count, truth_count = np.count_nonzero(predicted), np.count_nonzero(truth)
+    return scores_of_counts(*mask_counts(predicted, truth))
+
+
+def scores_of_counts(true_positives, predicted_count, truth_count):
+    """(precision, recall, F1) from pixel counts (summed over many images, for evaluation)."""
     precision = true_positives / predicted_count if predicted_count else 0.0
     recall = true_positives / truth_count if truth_count else 0.0
     f1 = 2 * precision * recall / (precision + recall) if precision + recall else 0.0

@@ -1,5 +1,4 @@
 """`topic echo | list | hz | pub`: ros2cli's topic verbs, for environments without ros2cli."""
-import argparse
 import math
 import sys
 import time
