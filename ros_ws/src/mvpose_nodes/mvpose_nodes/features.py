@@ -86,6 +86,10 @@ class Features:
     frontness: float = 0.0                           # share of the head that is skin: 1 = the face is seen
     timings: dict = field(default_factory=dict)      # stage -> seconds
 
+    def visible_keypoints(self):
+        """{name: (x, y, confidence)} of the keypoints found (as the camera_features messages carry them)."""
+        return {name: (k.x, k.y, k.confidence) for name, k in self.keypoints.items() if k.visible}
+
 
 def ellipse_of(points):
     """Direct least-squares ellipse of boundary points (N, 2): (centre, semi-major, semi-minor, angle)."""

@@ -66,8 +66,8 @@ def fit_bag(args):
             for number in sorted(frame_set.images):
                 features = extractors[number](frame_set.images[number])
                 if features.person:
-                    views.append(view_from_features(frame_set.cameras[number], features.keypoints, features.contour,
-                                                    features.frontness))
+                    views.append(view_from_features(frame_set.cameras[number], features.visible_keypoints(),
+                                                    features.contour, features.frontness))
             try:
                 if profiler:
                     profiler.enable()
@@ -101,8 +101,9 @@ def eval_main(argv=None, prog='eval'):
     parser.add_argument('--truth', type=Path, help='bag with /mvpose/ground_truth (default: the recorded bag)')
     args = parser.parse_args(sys.argv[1:] if argv is None else argv)
     with exit_on_user_error(prog):
-        fitted = skeletons(args.bag, 'SKELETON_TOPIC')
-        truth = skeletons(args.truth or args.bag, 'GROUND_TRUTH_TOPIC')
+        from mvpose_nodes.camera_bag import GROUND_TRUTH_TOPIC, SKELETON_TOPIC
+        fitted = skeletons(args.bag, SKELETON_TOPIC)
+        truth = skeletons(args.truth or args.bag, GROUND_TRUTH_TOPIC)
         stamps = sorted(set(fitted) & set(truth))
         if not stamps:
             raise UserError(f"no stamp has both a fitted skeleton ({args.bag}) and a ground truth "
@@ -111,14 +112,12 @@ def eval_main(argv=None, prog='eval'):
     return 0
 
 
-def skeletons(bag_path, which):
+def skeletons(bag_path, topic):
     """{stamp_ns: joints (15, 3)} of one skeleton topic of a bag."""
     from rclpy.serialization import deserialize_message
     from mvpose_msgs.msg import Skeleton
-    from mvpose_nodes import camera_bag
     from mvpose_nodes.bagfile import BagReader
     from mvpose_nodes.rosconv import joints_from_skeleton, stamp_ns
-    topic = getattr(camera_bag, which)
     bag = BagReader(bag_path)
     if topic not in bag.topics:
         raise UserError(f"bag '{bag_path}' has no {topic}")

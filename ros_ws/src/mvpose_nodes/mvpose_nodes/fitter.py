@@ -134,11 +134,9 @@ class SkeletonFitter:
             # frame's evidence can flip between frames; the pose moves little in 40 ms).
             for limb in ('knee', 'ankle', 'elbow', 'wrist'):
                 left, right = f'left_{limb}', f'right_{limb}'
-                if left in found and right in found:
-                    straight = np.linalg.norm(found[left] - reference[J[left]]) + np.linalg.norm(found[right] - reference[J[right]])
-                    crossed = np.linalg.norm(found[left] - reference[J[right]]) + np.linalg.norm(found[right] - reference[J[left]])
-                    if crossed < straight:
-                        found[left], found[right] = found[right], found[left]
+                if left in found and right in found and crossed_is_nearer(
+                        found[left], found[right], reference[J[left]], reference[J[right]]):
+                    found[left], found[right] = found[right], found[left]
             for name, position in found.items():
                 reference[J[name]] = position
         candidate = None
@@ -271,14 +269,10 @@ class SkeletonFitter:
             labelled = [(f'left_{n}', f'right_{n}') for n in names if f'left_{n}' in keypoints and f'right_{n}' in keypoints]
             if not labelled:
                 continue
-            ends = [J[j] for pair in labelled for j in pair]
-            projected, _ = view.camera.project(joints[ends])
-            straight = crossed = 0.0
-            for index, (left, right) in enumerate(labelled):
-                p_left, p_right = projected[2 * index], projected[2 * index + 1]
-                straight += np.hypot(*(p_left - keypoints[left][:2])) + np.hypot(*(p_right - keypoints[right][:2]))
-                crossed += np.hypot(*(p_left - keypoints[right][:2])) + np.hypot(*(p_right - keypoints[left][:2]))
-            if crossed < straight:
+            projected, _ = view.camera.project(joints[[J[j] for pair in labelled for j in pair]])
+            # All the group's pairs at once: the projected lefts and rights against the labelled ones.
+            if crossed_is_nearer(projected[0::2], projected[1::2], [keypoints[left][:2] for left, _ in labelled],
+                                 [keypoints[right][:2] for _, right in labelled]):
                 for name in names:
                     left, right = f'left_{name}', f'right_{name}'
                     for mine, other in ((left, right), (right, left)):
@@ -295,24 +289,20 @@ class SkeletonFitter:
         indices = [P[name] for name in STAGE_PARAMETERS[stage]]
         steps = np.array([STEP['position'] if name.endswith(('_x', '_y', '_z')) else STEP['angle']
                           for name in STAGE_PARAMETERS[stage]])
+        if not self.has_evidence(stage, views):
+            return parameters, StageResult(stage, 0.0, 0, [], False)
         trial = parameters.copy()
-        cameras_used = set()
-
-        limits = [(i, JOINT_LIMITS[name]) for i, name in zip(range(len(indices)), STAGE_PARAMETERS[stage])
-                  if name in JOINT_LIMITS]
+        start = parameters[indices]
+        limits = [(i, JOINT_LIMITS[name]) for i, name in enumerate(STAGE_PARAMETERS[stage]) if name in JOINT_LIMITS]
 
         def cost(values):
             trial[indices] = values
-            total, used = self.stage_cost(stage, trial, views)
-            cameras_used.update(used)
+            total, _ = self.stage_cost(stage, trial, views)
             # Priors: the pose changes little between frames at 25 fps, and joints have limits.
             total += SMOOTHNESS_WEIGHT * np.sum(((values - start) / steps) ** 2)
             for i, (low, high) in limits:
                 total += LIMIT_WEIGHT * (max(low - values[i], 0.0) + max(values[i] - high, 0.0)) ** 2
             return total
-        start = parameters[indices]
-        if not self.has_evidence(stage, views):
-            return parameters, StageResult(stage, 0.0, 0, [], False)
         simplex = np.vstack([start, start + np.diag(steps)])
         result = minimize(cost, start, method='Nelder-Mead', options={
             'initial_simplex': simplex, 'xatol': SIMPLEX_TOLERANCE, 'fatol': np.inf, 'adaptive': False,
@@ -380,11 +370,18 @@ def robust_triangulate(cameras, pixels, weights):
 
 
 def view_from_features(camera, keypoints, contour, frontness=None):
-    """A View of one camera from its features: keypoints {name: object with x, y, confidence,
-    visible}, its ContourLabels (or None) and its frontness."""
+    """A View of one camera from its features: keypoints {name: (x, y, confidence)} (the visible ones),
+    its ContourLabels (or None) and its frontness."""
     from mvpose_nodes.objective import boundary_distances
     distances = None
     if contour is not None and len(contour.points):
         distances = boundary_distances(contour, (camera.width, camera.height))
-    return View(camera, distances, {name: (k.x, k.y, k.confidence) for name, k in keypoints.items() if k.visible},
-                frontness)
+    return View(camera, distances, keypoints, frontness)
+
+
+def crossed_is_nearer(left, right, to_left, to_right):
+    """Whether left/right points ((d,) or (N, d) for N pairs) lie nearer to others the other way round:
+    the summed distances, left to right and right to left, against left to left and right to right."""
+    def distance(a, b):
+        return np.linalg.norm(np.subtract(a, b), axis=-1).sum()
+    return distance(left, to_right) + distance(right, to_left) < distance(left, to_left) + distance(right, to_right)

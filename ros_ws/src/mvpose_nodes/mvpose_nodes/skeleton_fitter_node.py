@@ -19,8 +19,7 @@ from visualization_msgs.msg import MarkerArray
 
 from mvpose_nodes.body_model import PARAMETER_NAMES
 from mvpose_nodes.errors import UserError
-from mvpose_nodes.fitter import SkeletonFitter, View
-from mvpose_nodes.objective import boundary_distances
+from mvpose_nodes.fitter import SkeletonFitter, view_from_features
 from mvpose_nodes.rosconv import (camera_from_messages, contour_from_message, joint_state, keypoints_from_messages,
                                   skeleton_markers, skeleton_message, stage_messages, stamp_ns)
 from mvpose_nodes.rosutil import run_node
@@ -55,6 +54,7 @@ class SkeletonFitterNode(Node):
             groups={channel: channel[0] for channel in channels},
             timeout_ns=int(self.get_parameter('camera_timeout').value * 1e9))
         self.calibration = {k: {} for k in cameras}
+        self.cameras_known = {}   # camera number -> Camera, from its latest calibration messages
         self.fitter = SkeletonFitter()
         self.reported = set()
         for k in cameras:
@@ -73,8 +73,16 @@ class SkeletonFitterNode(Node):
             self.get_logger().warning(text)
 
     def calibration_receiver(self, camera, kind):
+        """Keep the camera's messages; once both are there, its Camera (converted once, not per frame)."""
         def receive(message):
-            self.calibration[camera][kind] = message
+            parts = self.calibration[camera]
+            parts[kind] = message
+            if 'info' in parts and 'pose' in parts:
+                try:
+                    self.cameras_known[camera] = camera_from_messages(camera, parts['info'], parts['pose'])
+                except ValueError as error:
+                    self.cameras_known.pop(camera, None)
+                    self.report_once(f'bad calibration {camera}', f'/cam{camera} calibration unusable: {error}')
         return receive
 
     def receiver(self, camera, name):
@@ -84,16 +92,11 @@ class SkeletonFitterNode(Node):
         return receive
 
     def camera(self, number):
-        parts = self.calibration[number]
-        if 'info' not in parts or 'pose' not in parts:
-            self.report_once(f'calibration {number}', f'no camera_info/camera_pose for camera {number} yet: '
+        camera = self.cameras_known.get(number)
+        if camera is None:
+            self.report_once(f'calibration {number}', f'no usable camera_info/camera_pose for camera {number}: '
                                                       'its features are not used until they arrive')
-            return None
-        try:
-            return camera_from_messages(number, parts['info'], parts['pose'])
-        except ValueError as error:
-            self.report_once(f'bad calibration {number}', f'/cam{number} calibration unusable: {error}')
-            return None
+        return camera
 
     def fit(self, frame_set):
         views = []
@@ -110,8 +113,8 @@ class SkeletonFitterNode(Node):
             except ValueError as error:
                 self.report_once(f'contour {number}', f'/cam{number}/labelled_contour: {error}; dropped')
                 continue
-            distances = boundary_distances(labels, (camera.width, camera.height)) if len(labels.points) else None
-            views.append(View(camera, distances, keypoints_from_messages(ellipses, contour), ellipses.face_visibility))
+            views.append(view_from_features(camera, keypoints_from_messages(ellipses, contour), labels,
+                                            ellipses.face_visibility))
         stamp = frame_set.stamp_ns
         if len(views) < 2:
             self.report_once('few views', f'fewer than 2 cameras with a person at {stamp} ns: no fit '
