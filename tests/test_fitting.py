@@ -134,3 +134,69 @@ def test_too_few_views_is_a_clear_error():
     motion = retarget(load_bvh(cmu_clip('07_01')))
     with pytest.raises(ValueError, match='too few views'):
         SkeletonFitter().fit(0.0, exact_views(studio_rig(cameras=[3]), motion.joints[0]))
+
+
+def walk_found(motion, frame, rng, swap):
+    """'Triangulated' joints of a walk frame: the truth with 2 cm noise, pairs given the wrong way round
+    where `swap` says (as triangulation leaves them: it does not know the person's sides)."""
+    truth = motion.joints[frame]
+    found = {name: truth[JOINT_NAMES.index(name)] + rng.normal(0, 0.02, 3)
+             for name in ('pelvis', 'neck', 'head', *(f'{side}_{limb}' for side in ('left', 'right')
+                                                      for limb in ('knee', 'ankle', 'elbow', 'wrist')))}
+    for limb in ('knee', 'ankle', 'elbow', 'wrist'):
+        if swap[limb]:
+            found[f'left_{limb}'], found[f'right_{limb}'] = found[f'right_{limb}'], found[f'left_{limb}']
+    return found
+
+
+def test_limb_tracks_correct_a_wrong_start_and_keep_the_sides_through_a_walk():
+    """Started the wrong way round (no face seen), the pairs are put right once the person is seen
+    walking (within 0.2 s) and then stay right through the strides, whatever the triangulation's order."""
+    from mvpose_nodes.fitter import LimbTracks
+    motion = retarget(load_bvh(cmu_clip('07_01'))).placed()
+    rng = np.random.default_rng(3)
+    tracks = LimbTracks()
+    wrong = []
+    for frame in range(60):
+        swap = {limb: bool(rng.integers(2)) for limb in ('knee', 'ankle', 'elbow', 'wrist')}
+        found = walk_found(motion, frame, rng, swap if frame else dict.fromkeys(swap, True))
+        tracks.label(frame / 25.0, found)
+        joints = motion.joints[frame].copy()
+        for name, position in found.items():
+            joints[JOINT_NAMES.index(name)] = position   # the fit follows the labelled joints
+        tracks.append(frame / 25.0, joints)
+        truth = motion.joints[frame]
+        wrong.append([np.linalg.norm(found[f'left_{limb}'] - truth[JOINT_NAMES.index(f'left_{limb}')])
+                      > np.linalg.norm(found[f'left_{limb}'] - truth[JOINT_NAMES.index(f'right_{limb}')])
+                      for limb in ('knee', 'ankle', 'elbow', 'wrist')])
+    wrong = np.array(wrong)
+    assert wrong[0].all(), 'the first frame keeps its (wrong) guess: nothing tells yet'
+    assert not wrong[5:].any(), np.flatnonzero(wrong.any(axis=1))
+
+
+def test_skeleton_fitter_node_survives_nan_calibration_and_malformed_contours(background, ros_context):
+    """Over DDS: a NaN camera_info and a contour whose arrays disagree are logged with the topic and the
+    cause, and dropped; the node keeps running (it still answers Ctrl-C with exit 0)."""
+    fitter = background('run', 'skeleton_fitter', '--ros-args', '-p', 'cameras:=[3, 5]')
+    wait_for_graph([])
+    nan_info = ("{header: {frame_id: cam3}, width: 1920, height: 1080, distortion_model: plumb_bob, "
+                "k: [.nan, 0, 960, 0, 1400, 540, 0, 0, 1], d: [0, 0, 0, 0, 0]}")
+    pose = "{header: {frame_id: world}, pose: {orientation: {w: 1.0}}}"
+    qos = ('--qos-durability', 'transient_local', '-w', 1, '--once')
+    run_mvpose('topic', 'pub', '/cam3/camera_info', 'sensor_msgs/msg/CameraInfo', nan_info, *qos)
+    run_mvpose('topic', 'pub', '/cam3/camera_pose', 'geometry_msgs/msg/PoseStamped', pose, *qos)
+    run_mvpose('topic', 'pub', '/cam5/camera_info', 'sensor_msgs/msg/CameraInfo', nan_info.replace('.nan', '1400'), *qos)
+    run_mvpose('topic', 'pub', '/cam5/camera_pose', 'geometry_msgs/msg/PoseStamped', pose, *qos)
+    stamp = '{header: {stamp: {sec: 5}}'
+    for k in (3, 5):  # one frame set whose contours have 3 pixels but 1 label
+        run_mvpose('topic', 'pub', f'/cam{k}/silhouette', 'sensor_msgs/msg/Image', stamp + '}', '-w', 1, '--once')
+        run_mvpose('topic', 'pub', f'/cam{k}/skin_ellipses', 'mvpose_msgs/msg/SkinEllipseArray', stamp + '}',
+                   '-w', 1, '--once')
+        run_mvpose('topic', 'pub', f'/cam{k}/labelled_contour', 'mvpose_msgs/msg/LabelledContour',
+                   stamp + ', x: [1, 2, 3], y: [1, 2, 3], labels: [1], sides: [1]}', '-w', 1, '--once')
+    import time
+    time.sleep(2.0)
+    code, _, err = fitter.interrupt()
+    assert code == 0, err
+    assert '/cam3 calibration unusable: camera_info K is not a valid intrinsic matrix' in err, err
+    assert '/cam5/labelled_contour: LabelledContour x, y, labels and sides differ in length; dropped' in err, err

@@ -159,3 +159,59 @@ def test_best_assignment_undoes_per_view_left_right_swaps():
         assert found.tolist() == swaps.tolist()
         assert left_estimate == pytest.approx(left, abs=0.005)
         assert right_estimate == pytest.approx(right, abs=0.005)
+
+
+# The outline objective (objective.outline_cost): capsules explaining a silhouette's outline.
+
+CAPSULE = ((150.0, 120.0), (420.0, 300.0))  # a limb's axis [px] in a 640 × 480 image
+CAPSULE_RADIUS_PX = 18
+
+
+def capsule_outline():
+    """The Outline of a silhouette that is one capsule (radius CAPSULE_RADIUS_PX around CAPSULE)."""
+    import cv2
+    from mvpose_nodes.contour import outer_contour
+    from mvpose_nodes.objective import outline_of
+    mask = np.zeros(IMAGE_SIZE[::-1], np.uint8)
+    cv2.line(mask, tuple(map(int, CAPSULE[0])), tuple(map(int, CAPSULE[1])), 1, 2 * CAPSULE_RADIUS_PX + 1)
+    return outline_of(outer_contour(mask))
+
+
+def outline_terms(outline, start, end, radius, terminal=False):
+    from mvpose_nodes.objective import inside_cost, outline_cost
+    starts, ends = np.array([start], float), np.array([end], float)
+    return (outline_cost(outline.points, starts, ends, np.array([radius], float), np.array([terminal]), 10.0, 20.0),
+            inside_cost(starts, ends, outline))
+
+
+def test_capsule_residuals_match_a_brute_force_distance():
+    from mvpose_nodes.objective import capsule_residuals
+    rng = np.random.default_rng(5)
+    starts, ends = rng.uniform(0, 400, (3, 2)), rng.uniform(0, 400, (3, 2))
+    radii = rng.uniform(5, 20, 3)
+    points = rng.uniform(-50, 450, (200, 2))
+    dense = [np.linspace(a, b, 20001) for a, b in zip(starts, ends)]   # segments sampled every < 0.03 px
+    brute = np.array([[np.linalg.norm(segment - q, axis=1).min() for segment in dense] for q in points]) - radii
+    np.testing.assert_allclose(capsule_residuals(points, starts, ends, radii, np.zeros(3, bool)), brute, atol=0.05)
+    # Per-point capsules (each camera's own) give the same as shared ones.
+    shared = np.broadcast_to(starts, (200, 3, 2)), np.broadcast_to(ends, (200, 3, 2)), np.broadcast_to(radii, (200, 3))
+    np.testing.assert_allclose(capsule_residuals(points, *shared, np.zeros(3, bool)), brute, atol=0.05)
+    # A terminal capsule does not explain what lies beyond its end.
+    beyond = ends[0] + 10 * (ends[0] - starts[0]) / np.linalg.norm(ends[0] - starts[0])
+    assert np.isinf(capsule_residuals(beyond[None], starts[:1], ends[:1], radii[:1], np.array([True]))[0, 0])
+
+
+def test_outline_cost_is_least_on_the_axis_whatever_the_radius():
+    """The outline term puts the segment midway between the sides even with a wrong radius (here 12 px
+    for an 18 px limb), as Eq. 4 does; shifting it sideways or turning it costs more, and a segment
+    leaving the silhouette pays the inside term."""
+    outline = capsule_outline()
+    start, end = np.array(CAPSULE[0]), np.array(CAPSULE[1])
+    across = np.array([-(end - start)[1], (end - start)[0]]) / np.linalg.norm(end - start)
+    on_axis, inside = outline_terms(outline, start, end, radius=12)
+    assert inside == 0.0
+    for shift in (3, 6, -6):
+        assert outline_terms(outline, start + shift * across, end + shift * across, radius=12)[0] > on_axis, shift
+    turned = outline_terms(outline, start + 8 * across, end - 8 * across, radius=12)[0]
+    assert turned > on_axis
+    assert outline_terms(outline, start + 40 * across, end + 40 * across, radius=12)[1] > 0, 'outside the silhouette'

@@ -10,11 +10,9 @@ answered with empty features carrying a status; the node keeps running.
 """
 import re
 
-import rclpy
 from mvpose_msgs.msg import LabelledContour, SkinEllipseArray
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult)
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import CameraInfo, CompressedImage, Image
 
 from mvpose_nodes.camera_features_config import PARAMETERS, check, settings_from
@@ -22,13 +20,12 @@ from mvpose_nodes.errors import UserError
 from mvpose_nodes.features import FeatureExtractor, draw_features
 from mvpose_nodes.rosconv import (empty_feature_messages, feature_messages, image_from_compressed, image_from_raw,
                                   rgb_image)
-from mvpose_nodes.rosutil import run_node
+from mvpose_nodes.rosutil import LATCHED, run_node
 from mvpose_nodes.silhouette import BackgroundModel
 from mvpose_nodes.skin import SkinModel
 from mvpose_nodes.skin_cli import default_model_path
 
 CAMERA_NAMESPACE = re.compile(r'^/cam(\d+)$')
-LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 STREAM_DEPTH = 5
 
 

@@ -95,17 +95,28 @@ def euler_from_quaternion(q):
 def forward_kinematics(parameters, lengths):
     """Joints (15, 3) [m] and bone frames {bone: 3×3 world rotation} of 29 parameters (Table 1 order)."""
     parameters = np.asarray(parameters, dtype=float)
+    values = np.append(parameters, 0.0)  # index -1: an angle the bone does not have
     joints = np.zeros((len(JOINT_NAMES), 3))
-    joints[J['pelvis']] = parameters[[P['torso_x'], P['torso_y'], P['torso_z']]]
-    frames = {}
-    for bone in BONES:
-        parent = np.eye(3) if bone.name == 'torso' else frames[bone.parent]
-        angles = [parameters[P[name]] if name else 0.0 for name in (list(bone.angles) + [None] * 3)[:3]]
-        frames[bone.name] = parent @ euler_matrix(*angles) if bone.angles else parent
-        direction = frames[bone.name] @ np.array(bone.rest, dtype=float) if bone.angles \
-            else parent @ np.array(bone.rest, dtype=float)
-        joints[J[bone.joint]] = joints[J[bone.parent_joint]] + lengths[bone.length] * direction
-    return joints, frames
+    joints[J['pelvis']] = parameters[_TORSO_POSITION]
+    frames = []
+    for parent, angles, rest, length, start, end in _CHAIN:
+        frame = _IDENTITY if parent < 0 else frames[parent]
+        if angles is not None:
+            frame = frame @ euler_matrix(*values[angles])
+        frames.append(frame)
+        joints[end] = joints[start] + lengths[length] * (frame @ rest)
+    return joints, dict(zip(_BONE_NAMES, frames))
+
+
+# Forward kinematics' plan, worked out once (it runs hundreds of times per fitted frame): per bone in
+# BONES order, its parent bone's index (−1: the world), the parameter indices of (rx, ry, rz) (−1: fixed
+# at 0; None: no angles, the parent's frame), the rest direction, the length key, and the joint indices.
+_IDENTITY = np.eye(3)
+_TORSO_POSITION = [P['torso_x'], P['torso_y'], P['torso_z']]
+_BONE_NAMES = [bone.name for bone in BONES]
+_CHAIN = [(_BONE_NAMES.index(bone.parent) if bone.name != 'torso' else -1,
+           np.array([P[name] if name else -1 for name in (list(bone.angles) + [None] * 3)[:3]]) if bone.angles else None,
+           np.array(bone.rest, dtype=float), bone.length, J[bone.parent_joint], J[bone.joint]) for bone in BONES]
 
 
 def torso_rotation(joints):

@@ -13,6 +13,9 @@ from rclpy.signals import SignalHandlerOptions
 from mvpose_nodes.bagfile import DEFAULT_QOS_PROFILE
 from mvpose_nodes.errors import UserError
 
+# Reliable, transient-local, depth 1: calibration, and the last skeleton for late subscribers.
+LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+
 
 def run_node(make_node, args=None):
     """Jazzy's rclpy run pattern for a node that spins until Ctrl-C or shutdown; the exit code.

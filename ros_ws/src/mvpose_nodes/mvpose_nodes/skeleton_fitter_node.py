@@ -8,12 +8,10 @@ parameters as /mvpose/joint_states (sensor_msgs/JointState), and /mvpose/skeleto
 (visualization_msgs/MarkerArray in `world`, for RViz and Foxglove). A camera whose features stop is
 left out after camera_timeout (status DEGRADED) and rejoins when they come back.
 """
-import rclpy
 from geometry_msgs.msg import PoseStamped
 from mvpose_msgs.msg import LabelledContour, Skeleton, SkinEllipseArray
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import CameraInfo, Image, JointState
 from visualization_msgs.msg import MarkerArray
 
@@ -22,10 +20,9 @@ from mvpose_nodes.errors import UserError
 from mvpose_nodes.fitter import SkeletonFitter, view_from_features
 from mvpose_nodes.rosconv import (camera_from_messages, contour_from_message, joint_state, keypoints_from_messages,
                                   skeleton_markers, skeleton_message, stage_messages, stamp_ns)
-from mvpose_nodes.rosutil import run_node
+from mvpose_nodes.rosutil import LATCHED, run_node
 from mvpose_nodes.sync import ApproximateTimeSynchronizer
 
-LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 FEATURES = {'silhouette': Image, 'skin_ellipses': SkinEllipseArray, 'labelled_contour': LabelledContour}
 
 
