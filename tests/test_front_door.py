@@ -49,11 +49,18 @@ def test_front_door_errors_are_one_line():
     assert_one_line_error(run_mvpose('launch', 'no_such_file.yaml', check=False), 'no_such_file.yaml')
 
 
-def test_demo_replays_a_bag_and_shows_every_skeleton(tmp_path):
+def test_demo_runs_the_graph_on_a_bag_and_writes_its_results(tmp_path):
+    """The demo's whole path on a 4-frame bag: the graph over DDS fits every frame set, Table 2 is printed,
+    and the output folder gets the recorded skeletons, the pictures, the animation and the BVH."""
     bag = tmp_path / 'walk'
-    run_mvpose('synth', '--cameras', 3, 5, '--frames', '60-64', '--resolution', '320x180', '-o', bag, timeout=300)
-    result = run_mvpose('demo', '--bag', bag, '-o', tmp_path / 'pictures', timeout=120)
+    run_mvpose('synth', '--cameras', 3, 5, 7, '--frames', '70-73', '--resolution', '960x540', '-o', bag, timeout=300)
+    output = tmp_path / 'results'
+    result = run_mvpose('demo', '--bag', bag, '-o', output, '--rate', 0.1, timeout=240)
     frames = [line for line in result.stdout.splitlines() if line.startswith('[demo] frame')]
-    assert [int(line.split()[2]) for line in frames] == [60, 61, 62, 63, 64]
-    assert 'shown: 5 of 5 skeletons' in result.stdout
-    assert (tmp_path / 'pictures' / 'walk_preview.png').is_file()
+    assert sorted(int(line.split()[2]) for line in frames) == [70, 71, 72, 73], result.stdout
+    assert 'fitted 4 of its 4 frame sets' in result.stdout
+    assert '(4 frames matched by stamp)' in result.stdout and 'Eq. 12 per frame' in result.stdout
+    for name in ('error_per_frame.png', 'fit_over_cam5.mp4', 'fitted.bvh', 'graph.log', 'fitted/metadata.yaml'):
+        assert (output / name).is_file(), name
+    assert len(list(output.glob('contact_sheet_frame7?.png'))) == 1
+

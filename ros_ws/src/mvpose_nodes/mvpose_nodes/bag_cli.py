@@ -122,7 +122,7 @@ def play(args):
             publishers[topic] = node.create_publisher(classes[topic], topic, qos)
         clock = node.create_publisher(Clock, '/clock', 10) if args.clock else None
         if args.wait_for_subscribers:
-            wait_for_subscribers({**publishers, **({'/clock': clock} if clock else {})},
+            wait_for_subscribers(node, {**publishers, **({'/clock': clock} if clock else {})},
                                  args.wait_for_subscribers, stop)
         stop.event.wait(args.delay)
         begin_ns = bag.start_ns + int(args.start_offset * 1e9)
@@ -138,12 +138,15 @@ def play(args):
     print(f'[play] published {played} messages on {len(topics)} topics', file=sys.stderr)
 
 
-def wait_for_subscribers(publishers, timeout, stop):
+def wait_for_subscribers(node, publishers, timeout, stop):
+    """Until every topic has a matched subscriber, and as many as the graph knows of (a topic with two
+    subscribers, e.g. camera_info read by a feature node and the fitter, waits for both)."""
     deadline = time.monotonic() + timeout
     unmatched = list(publishers)
     while unmatched and time.monotonic() < deadline and not stop.stopped:
         stop.event.wait(0.05)
-        unmatched = [topic for topic, publisher in publishers.items() if publisher.get_subscription_count() == 0]
+        unmatched = [topic for topic, publisher in publishers.items()
+                     if publisher.get_subscription_count() < max(1, node.count_subscribers(topic))]
     if unmatched:
         print(f"[play] no subscriber after {timeout:g} s on: {', '.join(unmatched)}; playing anyway", file=sys.stderr)
 

@@ -217,8 +217,10 @@ class Launch:
     so call it, or stop(), rather than just sleeping. Exit codes are those of the launch command.
     """
 
-    def __init__(self, specs, sigint_timeout=5.0, sigterm_timeout=5.0):
+    def __init__(self, specs, sigint_timeout=5.0, sigterm_timeout=5.0, output=None):
+        """output: a text file for the children's and the launch's lines (default: standard output)."""
         self.specs = list(specs)
+        self.output = output
         self.sigint_timeout = sigint_timeout
         self.sigterm_timeout = sigterm_timeout
         self.exit_code = None
@@ -268,6 +270,10 @@ class Launch:
                 time.sleep(POLL_INTERVAL)
         return self.exit_code
 
+    def pids(self):
+        """{process name: process id} of the processes started."""
+        return {spec.name: popen.pid for spec, popen in zip(self.specs, self._popens)}
+
     def request_stop(self, clean_exit_code=0):
         """Make wait() stop everything, then return clean_exit_code if SIGINT sufficed; fine in a signal handler."""
         if self._clean_stop_code is None:
@@ -289,7 +295,7 @@ class Launch:
 
     def _print(self, line):
         with self._print_lock:  # whole lines only, whichever reader thread prints
-            print(line, flush=True)
+            print(line, file=self.output or sys.stdout, flush=True)
 
     def _forward_output(self, name, stream):
         for line in stream:

@@ -8,13 +8,11 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from mvpose_nodes.body_model import BONES, JOINT_NAMES
 from mvpose_nodes.camera_bag import GROUND_TRUTH_TOPIC
 from mvpose_nodes.errors import ArgumentParser, UserError, exit_on_user_error
+from mvpose_nodes.report_pictures import draw_skeleton  # the project's one skeleton drawing function
 
 TILE_WIDTH = 640  # [px] of each camera's tile in the sheet
-INDEX = {name: i for i, name in enumerate(JOINT_NAMES)}
-COLOURS = {'left': (60, 220, 60), 'right': (255, 140, 30), 'centre': (250, 230, 40), 'truth': (255, 255, 255)}
 
 
 def build_parser(prog):
@@ -50,23 +48,6 @@ def frame_contents(bag_path, frame):
     if not seen:
         raise UserError(f"bag '{bag_path}' has no /cam<K>/image_raw[/compressed] topic")
     raise UserError(f"bag '{bag_path}' has no image at frame {frame} (its frames: {seen[0]}–{seen[-1]})")
-
-
-def draw_skeleton(image, camera, joints, truth):
-    """Draw the 14 bones and 15 joints of `joints` (15, 3) [m] projected by `camera` onto `image`."""
-    pixels, depth = camera.project(joints)
-    thickness = max(2, image.shape[1] // 400)
-    for parent, child in BONES:
-        a, b = INDEX[parent], INDEX[child]
-        if depth[a] <= 0 or depth[b] <= 0:
-            continue
-        side = 'truth' if truth else next((s for s in ('left', 'right') if child.startswith(s)), 'centre')
-        cv2.line(image, tuple(np.round(pixels[a]).astype(int)), tuple(np.round(pixels[b]).astype(int)),
-                 COLOURS[side], thickness, cv2.LINE_AA)
-    for pixel, z in zip(pixels, depth):
-        if z > 0:
-            cv2.circle(image, tuple(np.round(pixel).astype(int)), thickness + 2,
-                       COLOURS['truth'] if truth else (40, 40, 40), -1, cv2.LINE_AA)
 
 
 def contact_sheet(bag_path, frame):

@@ -1,0 +1,116 @@
+"""`./mvpose bench`: its statistics on constructed numbers, its one-line errors, and one run of the real graph."""
+import math
+import os
+import re
+
+import pytest
+
+from conftest import assert_one_line_error, run_mvpose
+from mvpose_nodes import bench
+
+
+def test_median_and_p95_interpolate_like_numpy():
+    assert bench.median_p95(range(1, 101)) == pytest.approx((50.5, 95.05))
+    assert bench.median_p95([7.0]) == (7.0, 7.0)
+    assert bench.median_p95([3, 1, 2]) == pytest.approx((2.0, 2.9))
+    median, p95 = bench.median_p95([])
+    assert math.isnan(median) and math.isnan(p95)
+
+
+def test_stage_latencies_from_wall_times():
+    sent = {100: 10.0, 200: 11.0, 300: 12.0}
+    features = {100: {3: 10.05, 5: 10.10, 7: 10.20},
+                200: {3: 11.30, 5: 11.10, 7: 11.20},
+                300: {3: 12.40}}                       # 300: two contours never came, no skeleton
+    skeletons = {100: (10.50, 0.25), 200: (11.90, 0.40)}
+    stages = bench.stage_latencies(sent, features, skeletons)
+    assert sorted(stages['features']) == pytest.approx([50, 100, 100, 200, 200, 300, 400])
+    assert stages['fit'] == pytest.approx([250, 400])
+    assert stages['end to end'] == pytest.approx([500, 900])
+    # skeleton - fit - last contour: 10.50 - 0.25 - 10.20 and 11.90 - 0.40 - 11.30
+    assert stages['sync wait'] == pytest.approx([50, 200])
+
+
+def test_throughput_counts_fitted_sets_from_first_send_to_last_skeleton():
+    sent = {1: 10.0, 2: 10.1, 3: 10.2, 4: 10.3, 5: 10.4}
+    skeletons = {1: (10.5, 0.2), 2: (11.0, 0.2), 3: (11.5, 0.2), 4: (12.0, 0.2)}   # 5 never fitted
+    assert bench.throughput(sent, skeletons) == pytest.approx(4 / 2.0)
+    assert bench.throughput(sent, {}) == 0.0
+
+
+def test_decode_only_rate_is_one_over_cameras_times_median_decode():
+    assert bench.decode_only_rate([10.0, 10.0, 40.0], cameras=3) == pytest.approx(1000 / 30)
+    assert bench.decode_only_rate([5.0, 4.0, 6.0, 100.0], cameras=2) == pytest.approx(1000 / 11)
+
+
+def test_cpu_ticks_and_peak_rss_from_proc_texts():
+    stat = ('4242 (py thon) (x)) S 1 4242 4242 0 -1 4194560 9000 0 0 0 '
+            '1234 567 0 0 20 0 5 0 100 900000 30000 18446744073709551615')
+    assert bench.cpu_ticks(stat) == 1234 + 567
+    status = 'Name:\tpython\nVmPeak:\t  900000 kB\nVmHWM:\t  204800 kB\nVmRSS:\t  150000 kB\n'
+    assert bench.peak_rss_kib(status) == 204800
+    assert bench.peak_rss_kib('Name:\tzombie\nState:\tZ (zombie)\n') is None
+
+
+def test_sample_process_reads_this_process():
+    ticks, peak = bench.sample_process(os.getpid())
+    assert ticks >= 0 and peak > 1024          # a Python with numpy holds more than 1 MiB
+    assert bench.sample_process(2 ** 22 + 1) is None   # above pid_max's default: no such process
+
+
+def test_node_usage_over_the_run():
+    before = {'/cam3/camera_features': (1000, 100000), 'skeleton_fitter': (500, 150000), 'gone': (10, 1)}
+    after = {'/cam3/camera_features': (1200, 153600), 'skeleton_fitter': (1500, 204800), 'gone': None}
+    usage = bench.node_usage(before, after, wall_seconds=20.0, ticks_per_second=100)
+    assert usage['/cam3/camera_features'] == pytest.approx((2.0, 10.0, 150.0))
+    assert usage['skeleton_fitter'] == pytest.approx((10.0, 50.0, 200.0))
+    assert all(math.isnan(value) for value in usage['gone'])
+
+
+def test_table_reports_rates_latencies_and_nodes():
+    result = bench.BenchResult('bags/x', (3, 5, 7), 1920, 1080, 2, 4,
+                               sent={1: 0.0, 2: 0.5, 3: 1.0, 4: 1.5},
+                               features={s: {3: t + 0.05, 5: t + 0.06, 7: t + 0.07}
+                                         for s, t in {1: 0.0, 2: 0.5, 3: 1.0, 4: 1.5}.items()},
+                               skeletons={1: (0.4, 0.2), 2: (0.9, 0.2), 3: (2.0, 0.2)}, unfitted=1,
+                               decode_ms=[4.0] * 12, usage={'skeleton_fitter': (1.5, 75.0, 200.0)},
+                               wall_seconds=2.0)
+    table = bench.format_table(result)
+    assert '3 of 4 fitted, 1 with too few views' in table
+    assert re.search(r'end-to-end\s+1\.50 frame sets/s', table)          # 3 fitted / (2.0 - 0.0) s
+    assert re.search(r'decode only\s+83\.3 frame sets/s', table)         # 1000 / (3 x 4 ms)
+    assert 'end-to-end / decode-only = 0.018' in table
+    assert re.search(r'fit\s+200\.0\s+200\.0', table)
+    assert re.search(r'skeleton_fitter\s+1\.5\s+75\s+200', table)
+
+
+def test_bad_input_is_one_line(tmp_path):
+    assert_one_line_error(run_mvpose('bench', '--window', 0, check=False), '--window must be at least 1')
+    assert_one_line_error(run_mvpose('bench', tmp_path / 'nothing', check=False), 'not found')
+    from rclpy.serialization import serialize_message
+    from sensor_msgs.msg import CameraInfo
+    from mvpose_nodes.bagfile import BagWriter
+    with BagWriter(tmp_path / 'cam3_only') as out:
+        out.add_topic('/cam3/camera_info', 'sensor_msgs/msg/CameraInfo')
+        out.write('/cam3/camera_info', serialize_message(CameraInfo()), 1)
+    assert_one_line_error(run_mvpose('bench', tmp_path / 'cam3_only', check=False),
+                          'lacks', '/cam3/image_raw/compressed', '/cam5/image_raw/compressed')
+
+
+@pytest.mark.timeout(150)
+def test_bench_runs_every_frame_set_through_the_graph(tmp_path):
+    bag = tmp_path / 'bag'
+    run_mvpose('synth', '--cameras', 3, 5, 7, '--frames', '70-73', '--resolution', '960x540', '-o', bag, timeout=60)
+    result = run_mvpose('bench', bag, '--window', 2, timeout=90)
+    table = result.stdout
+    assert '(4 frame sets, cameras 3 5 7, 960×540, window 2)' in table
+    assert '4 of 4 fitted, none dropped' in table
+    rate = float(re.search(r'end-to-end\s+([\d.]+) frame sets/s', table).group(1))
+    assert rate > 0
+    for stage in ('decode', 'features', 'sync wait', 'fit', 'end to end'):
+        assert re.search(rf'^    {stage}\s+\d+\.\d\s+\d+\.\d', table, re.MULTILINE), stage
+    for node in ('/cam3/camera_features', '/cam5/camera_features', '/cam7/camera_features', 'skeleton_fitter'):
+        row = re.search(rf'^    {re.escape(node)}\s+([\d.]+)\s+(\d+)\s+(\d+)$', table, re.MULTILINE)
+        assert row, f'{node} row missing:\n{table}'
+        assert float(row.group(3)) > 20     # peak RSS of a Python node with rclpy and numpy [MiB]
+    assert '[bench]' in result.stderr       # the progress bar
