@@ -95,6 +95,7 @@ STAGE_CAPSULES = {  # bones whose capsules explain the outline in each stage (ob
 CAPSULE_ENDS = np.array([(J[bone.parent_joint], J[bone.joint]) for bone in BONES])   # (14, 2) joint indices
 CAPSULE_RADIUS = np.array([CAPSULE_RADII[bone.name.replace('left_', '').replace('right_', '')] for bone in BONES])
 CAPSULE_TERMINAL = np.array([bone.name.endswith(TERMINAL_BONES) for bone in BONES])
+STAGE_CAPSULE_INDEX = {stage: np.array([BONE_INDEX[name] for name in names]) for stage, names in STAGE_CAPSULES.items()}
 SWAPPABLE = {'legs': ('knee', 'ankle'), 'arms': ('elbow', 'wrist')}
 FACE_EVIDENCE = 0.2      # the summed (frontness − FRONT_SKIN_FRACTION) towards the cameras needed to trust the face
 TRAVEL_YAW_LIMIT = np.radians(45)  # a walking torso turned further from its direction of travel is turned back
@@ -142,10 +143,12 @@ class SkeletonFitter:
         self.lengths = None
         self.last_stamp = None
         self.tracks = LimbTracks()
+        self._targets = {}
         self.turns = 0   # times the torso was turned to face the direction of travel (facing_travel)
 
     def fit(self, stamp, views):
         started = time.perf_counter()
+        self._targets = {}   # keypoint_targets of this frame
         jump = self.last_stamp is None or stamp < self.last_stamp or stamp - self.last_stamp > TIME_JUMP
         self.last_stamp = stamp
         initialised = False
@@ -392,11 +395,13 @@ class SkeletonFitter:
             points is not None and len(points) for points in assigned)
 
     @staticmethod
-    def capsules(view, pixels, depth):
-        """The projected capsules of all bones in one view: starts, ends (14, 2) [px], radii (14,) [px]
-        (CAPSULE_RADIUS at the bone's mean depth), from the projected joints pixels (15, 2), depth (15,)."""
-        mean_depth = np.maximum(depth[CAPSULE_ENDS].mean(axis=1), 0.1)
-        return pixels[CAPSULE_ENDS[:, 0]], pixels[CAPSULE_ENDS[:, 1]], CAPSULE_RADIUS * view.camera.K[0, 0] / mean_depth
+    def capsules(view, pixels, depth, bones=slice(None)):
+        """The projected capsules of `bones` (indices into BONES; default all) in one view: starts, ends
+        (B, 2) [px], radii (B,) [px] (CAPSULE_RADIUS at the bone's mean depth), from the projected joints
+        pixels (15, 2), depth (15,)."""
+        ends = CAPSULE_ENDS[bones]
+        mean_depth = np.maximum(0.5 * (depth[ends[:, 0]] + depth[ends[:, 1]]), 0.1)
+        return pixels[ends[:, 0]], pixels[ends[:, 1]], CAPSULE_RADIUS[bones] * view.camera.K[0, 0] / mean_depth
 
     def outline_assignment(self, stage, parameters, views):
         """Per view, the outline points (M, 2) [px] that the stage's capsules explain in the pose
@@ -404,7 +409,7 @@ class SkeletonFitter:
         a view without an outline). Fixed for the stage's search, so that the torso is not pulled to
         explain the limbs, which are still where they were in the last frame."""
         joints, _ = forward_kinematics(parameters, self.lengths)
-        mine = [BONE_INDEX[name] for name in STAGE_CAPSULES[stage]]
+        mine = STAGE_CAPSULE_INDEX[stage]
         assigned = []
         for view in views:
             if view.outline is None:
@@ -423,12 +428,12 @@ class SkeletonFitter:
         joints, _ = forward_kinematics(parameters, self.lengths)
         projections = [view.camera.project(joints) for view in views]  # every joint, once per camera
         total, used = 0.0, set()
-        mine = [BONE_INDEX[name] for name in STAGE_CAPSULES[stage]]
+        mine = STAGE_CAPSULE_INDEX[stage]
         points, capsules = [], []   # the outline points of all views at once: one vectorised evaluation
         for index, (view, (pixels, depth)) in enumerate(zip(views, projections)):
             if assigned is None or assigned[index] is None or depth[CAPSULE_ENDS[mine]].min() <= 0:
                 continue
-            starts, ends, radii = (values[mine] for values in self.capsules(view, pixels, depth))
+            starts, ends, radii = self.capsules(view, pixels, depth, mine)
             total += INSIDE_WEIGHT * inside_cost(starts, ends, view.outline)
             points.append(assigned[index])
             capsules.append(np.broadcast_to(np.column_stack([starts, ends, radii]), (len(assigned[index]), len(mine), 5)))
@@ -446,17 +451,26 @@ class SkeletonFitter:
                                       enclosure_weight=ENCLOSURE_WEIGHT)
             total += BOUNDARY_WEIGHT * cost
             used.update(cameras)
-        for index, (view, (pixels, _)) in enumerate(zip(views, projections)):
-            names = [n for n in STAGE_KEYPOINTS[stage] if n in view.keypoints]
-            if not names:
-                continue
-            for name in names:
-                x, y, confidence = view.keypoints[name]
-                point = pixels[J[KEYPOINT_JOINT.get(name, name)]]
-                error = np.hypot(point[0] - x, point[1] - y)
-                total += KEYPOINT_WEIGHT * confidence * KEYPOINT_SCALE * np.log1p(error / KEYPOINT_SCALE)
+        for index, joint_indices, observed, weights in self.keypoint_targets(stage, views):
+            errors = np.linalg.norm(projections[index][0][joint_indices] - observed, axis=1)
+            total += KEYPOINT_WEIGHT * KEYPOINT_SCALE * float(weights @ np.log1p(errors / KEYPOINT_SCALE))
             used.add(index)
         return total, used
+
+    def keypoint_targets(self, stage, views):
+        """[(view index, joint indices (K,), keypoints (K, 2) [px], confidences (K,))] of the stage's
+        keypoints in each view that has some; worked out once per stage and frame (`views` is the
+        frame's list), since the search evaluates the cost hundreds of times."""
+        key = (stage, id(views))
+        if key not in self._targets:
+            self._targets[key] = []
+            for index, view in enumerate(views):
+                names = [n for n in STAGE_KEYPOINTS[stage] if n in view.keypoints]
+                if names:
+                    values = np.array([view.keypoints[n] for n in names], dtype=float)
+                    self._targets[key].append((index, [J[KEYPOINT_JOINT.get(n, n)] for n in names],
+                                               values[:, :2], values[:, 2]))
+        return self._targets[key]
 
 
 class LimbTracks:

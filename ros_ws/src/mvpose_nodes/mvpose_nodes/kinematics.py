@@ -95,28 +95,37 @@ def euler_from_quaternion(q):
 def forward_kinematics(parameters, lengths):
     """Joints (15, 3) [m] and bone frames {bone: 3×3 world rotation} of 29 parameters (Table 1 order)."""
     parameters = np.asarray(parameters, dtype=float)
-    values = np.append(parameters, 0.0)  # index -1: an angle the bone does not have
+    rotations = _euler_matrices(np.append(parameters, 0.0)[_ANGLE_INDEX])  # index −1: a fixed angle, 0
     joints = np.zeros((len(JOINT_NAMES), 3))
     joints[J['pelvis']] = parameters[_TORSO_POSITION]
     frames = []
-    for parent, angles, rest, length, start, end in _CHAIN:
+    for bone, (parent, has_angles, rest, length, start, end) in enumerate(_CHAIN):
         frame = _IDENTITY if parent < 0 else frames[parent]
-        if angles is not None:
-            frame = frame @ euler_matrix(*values[angles])
+        if has_angles:
+            frame = frame @ rotations[bone]
         frames.append(frame)
         joints[end] = joints[start] + lengths[length] * (frame @ rest)
     return joints, dict(zip(_BONE_NAMES, frames))
 
 
+def _euler_matrices(angles):
+    """euler_matrix of each row (rx, ry, rz) of angles (B, 3) [rad]: (B, 3, 3), all at once."""
+    (cx, cy, cz), (sx, sy, sz) = np.cos(angles).T, np.sin(angles).T
+    return np.stack([cz * cy, cz * sy * sx - sz * cx, cz * sy * cx + sz * sx,
+                     sz * cy, sz * sy * sx + cz * cx, sz * sy * cx - cz * sx,
+                     -sy, cy * sx, cy * cx], axis=1).reshape(-1, 3, 3)
+
+
 # Forward kinematics' plan, worked out once (it runs hundreds of times per fitted frame): per bone in
-# BONES order, its parent bone's index (−1: the world), the parameter indices of (rx, ry, rz) (−1: fixed
-# at 0; None: no angles, the parent's frame), the rest direction, the length key, and the joint indices.
+# BONES order, its parent bone's index (−1: the world), whether it has angles (else it keeps its parent's
+# frame), the rest direction, the length key, and the joint indices; and the parameter indices of each
+# bone's (rx, ry, rz) (−1: fixed at 0).
 _IDENTITY = np.eye(3)
 _TORSO_POSITION = [P['torso_x'], P['torso_y'], P['torso_z']]
 _BONE_NAMES = [bone.name for bone in BONES]
-_CHAIN = [(_BONE_NAMES.index(bone.parent) if bone.name != 'torso' else -1,
-           np.array([P[name] if name else -1 for name in (list(bone.angles) + [None] * 3)[:3]]) if bone.angles else None,
+_CHAIN = [(_BONE_NAMES.index(bone.parent) if bone.name != 'torso' else -1, bool(bone.angles),
            np.array(bone.rest, dtype=float), bone.length, J[bone.parent_joint], J[bone.joint]) for bone in BONES]
+_ANGLE_INDEX = np.array([[P[name] if name else -1 for name in (list(bone.angles) + [None] * 3)[:3]] for bone in BONES])
 
 
 def torso_rotation(joints):
