@@ -8,6 +8,8 @@ PACKAGE = 'mvpose_nodes'
 EXECUTABLES = {
     'camera_features': 'mvpose_nodes.camera_features_node:main',
     'skeleton_fitter': 'mvpose_nodes.skeleton_fitter_node:main',
+    'marker_tracker': 'mvpose_nodes.marker_tracker_node:main',
+    'marker_skeleton': 'mvpose_nodes.marker_skeleton_node:main',
     'bag': 'mvpose_nodes.bag_cli:main',
     'topic': 'mvpose_nodes.topic_cli:main',
     'launch': 'mvpose_nodes.launcher:main',

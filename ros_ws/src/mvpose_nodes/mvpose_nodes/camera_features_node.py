@@ -8,8 +8,6 @@ features_overlay, each with the source image's header unchanged. Bad input (unde
 encoded images, sizes that disagree with camera_info, no person) is logged once per cause and
 answered with empty features carrying a status; the node keeps running.
 """
-import re
-
 from mvpose_msgs.msg import LabelledContour, SkinEllipseArray
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult)
 from rclpy.node import Node
@@ -20,12 +18,11 @@ from mvpose_nodes.errors import UserError
 from mvpose_nodes.features import FeatureExtractor, draw_features
 from mvpose_nodes.rosconv import (empty_feature_messages, feature_messages, image_from_compressed, image_from_raw,
                                   rgb_image)
-from mvpose_nodes.rosutil import LATCHED, run_node
+from mvpose_nodes.rosutil import LATCHED, camera_of_namespace, run_node
 from mvpose_nodes.silhouette import BackgroundModel
 from mvpose_nodes.skin import SkinModel
 from mvpose_nodes.skin_cli import default_model_path
 
-CAMERA_NAMESPACE = re.compile(r'^/cam(\d+)$')
 STREAM_DEPTH = 5
 
 
@@ -45,11 +42,7 @@ def descriptor(parameter):
 class CameraFeaturesNode(Node):
     def __init__(self):
         super().__init__('camera_features')
-        match = CAMERA_NAMESPACE.match(self.get_namespace())
-        if not match:
-            raise UserError(f"camera_features must run in a camera's namespace /cam<K> (e.g. --ros-args -r "
-                            f"__ns:=/cam3); it runs in '{self.get_namespace()}'")
-        self.camera = int(match[1])
+        self.camera = camera_of_namespace(self.get_namespace(), 'camera_features')
         for parameter in PARAMETERS:
             self.declare_parameter(parameter.name, parameter.default, descriptor(parameter))
         self.values = {p.name: self.get_parameter(p.name).value for p in PARAMETERS}

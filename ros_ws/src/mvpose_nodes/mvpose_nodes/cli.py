@@ -31,6 +31,7 @@ ROUTED_TOOLS = {
     'skin': ('mvpose_nodes.skin_cli', 'train the skin colour model'),
     'fit': ('mvpose_nodes.fit_cli', 'fit the skeleton to a camera bag offline and record it'),
     'eval': ('mvpose_nodes.fit_cli', 'fitted skeleton against ground truth: paper 000 Table 2 layout'),
+    'markers': ('mvpose_nodes.markers_cli', 'marker mode (paper 001): tracking evaluated against a synthetic marker bag'),
     'export': ('mvpose_nodes.export_cli', 'fitted motion of a recorded bag as CSV, JSON or BVH'),
     'bench': ('mvpose_nodes.bench', 'end-to-end throughput and latency of the graph over DDS'),
 }

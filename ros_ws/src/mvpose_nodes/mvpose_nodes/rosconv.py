@@ -7,7 +7,8 @@ ValueError with a one-line reason, for the caller to log with the topic's name.
 import cv2
 import numpy as np
 from geometry_msgs.msg import Pose, PoseStamped
-from mvpose_msgs.msg import FitStage, Keypoint2D, LabelledContour, Skeleton, SkinEllipse, SkinEllipseArray
+from mvpose_msgs.msg import (FitStage, Keypoint2D, LabelledContour, MarkerTracks, Skeleton, SkinEllipse,
+                             SkinEllipseArray)
 from sensor_msgs.msg import CameraInfo, CompressedImage, Image
 
 from mvpose_nodes.body_model import JOINT_NAMES, joint_orientations
@@ -229,3 +230,29 @@ def skeleton_markers(joints, header, status):
     index = {name: i for i, name in enumerate(JOINT_NAMES)}
     lines.points = [spheres.points[index[name]] for bone in BONES for name in bone]
     return MarkerArray(markers=[spheres, lines])
+
+
+def marker_tracks(header, positions, flags, status=MarkerTracks.STATUS_OK, status_message=''):
+    """MarkerTracks of the 15 markers: positions (15, 2) [px] (x, y), flags (15,) FLAG_*; `header` kept."""
+    positions = np.asarray(positions, dtype=float).reshape(len(JOINT_NAMES), 2)
+    return MarkerTracks(header=header, status=status, status_message=status_message, names=list(JOINT_NAMES),
+                        x=positions[:, 0].tolist(), y=positions[:, 1].tolist(),
+                        flags=[int(flag) for flag in np.asarray(flags).reshape(len(JOINT_NAMES))])
+
+
+def tracks_from_message(message):
+    """(positions (15, 2) float64 [px], flags (15,) uint8) of a MarkerTracks in JOINT_NAMES order;
+    ValueError when it lacks markers or its arrays disagree."""
+    count = len(message.names)
+    if not (len(message.x) == len(message.y) == len(message.flags) == count):
+        raise ValueError('MarkerTracks names, x, y and flags differ in length')
+    index = {name: i for i, name in enumerate(message.names)}
+    missing = [name for name in JOINT_NAMES if name not in index]
+    if missing:
+        raise ValueError(f'MarkerTracks lacks markers {missing}')
+    order = [index[name] for name in JOINT_NAMES]
+    positions = np.column_stack([np.asarray(message.x, float)[order], np.asarray(message.y, float)[order]])
+    flags = np.asarray(message.flags, np.uint8)[order]
+    if not np.all(np.isfinite(positions[flags != MarkerTracks.FLAG_LOST])):
+        raise ValueError('MarkerTracks has a marker that is not lost but not finite')
+    return positions, flags

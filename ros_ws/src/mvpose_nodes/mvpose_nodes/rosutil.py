@@ -1,4 +1,5 @@
 """rclpy helpers shared by the nodes and tools: the Jazzy run pattern, QoS conversions, graph look-ups."""
+import re
 import signal
 import sys
 import threading
@@ -15,6 +16,15 @@ from mvpose_nodes.errors import UserError
 
 # Reliable, transient-local, depth 1: calibration, and the last skeleton for late subscribers.
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+
+
+def camera_of_namespace(namespace, executable):
+    """The camera number K of a per-camera node's namespace /cam<K>; UserError naming the executable."""
+    match = re.match(r'^/cam(\d+)$', namespace)
+    if not match:
+        raise UserError(f"{executable} must run in a camera's namespace /cam<K> (e.g. --ros-args -r "
+                        f"__ns:=/cam3); it runs in '{namespace}'")
+    return int(match[1])
 
 
 def run_node(make_node, args=None):

@@ -8,7 +8,7 @@ floor (z = 0) inside a cylindrical wall, both chroma blue, with the person's sof
 floor. Realism (exposure, white balance, sensor noise, lens distortion) is applied per camera by
 `Realism`. Pure NumPy/OpenCV; images are H×W×3 float32 linear RGB in [0, 1] until `finish`.
 """
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import cv2
 import numpy as np
@@ -21,7 +21,11 @@ J = {name: index for index, name in enumerate(JOINT_NAMES)}
 SKIN_BIT = 0x80  # set in a ground-truth label mask where the surface is skin
 
 # Materials (indices into Appearance.palette()).
-SKIN, HAIR, SHIRT, TROUSERS, SHOES, HEAD = range(1, 7)  # HEAD: hair or face, decided per pixel
+SKIN, HAIR, SHIRT, TROUSERS, SHOES, HEAD, MARKER = range(1, 8)  # HEAD: hair or face, decided per pixel
+MARKER_RED = (0.80, 0.015, 0.02)  # linear RGB of the joint markers: saturated red, nothing else on the person is
+MARKER_RADIUS = 0.02      # [m] the markers are 4 cm spheres
+MARKER_PROTRUSION = 0.5   # marker centre this many radii outside the body surface (the rest is sunk into it)
+MARKER_MIN_VISIBLE = 0.25  # a marker is visible in a camera when at least this fraction of its disc is seen
 
 STUDIO_RADIUS = 5.0       # [m] cylindrical wall around the capture area
 STUDIO_HEIGHT = 3.2       # [m] wall height; above it the dark ceiling
@@ -39,6 +43,7 @@ SHADOW_STRENGTH = 0.55
 SKIN_TONES = {'light': (0.75, 0.52, 0.42), 'medium': (0.62, 0.40, 0.30), 'dark': (0.28, 0.16, 0.10)}
 SHIRTS = {'red': (0.55, 0.12, 0.10), 'green': (0.12, 0.35, 0.12), 'grey': (0.30, 0.30, 0.30),
           'white': (0.80, 0.80, 0.78), 'yellow': (0.70, 0.55, 0.08)}
+RED_SHIRTS = ('red',)  # shirts a red-marker detector would take for markers
 
 
 @dataclass(frozen=True)
@@ -51,11 +56,12 @@ class Appearance:
     shoes: tuple = (0.035, 0.035, 0.04)  # black: brown leather is skin-coloured to any colour detector
     long_sleeves: bool = False
     girth: float = 1.0
+    markers: bool = False  # red marker spheres on the 15 joints (paper 001's marker suit), see marker_centres
 
     def palette(self):
-        """(7, 3) float32: row m = albedo of material m (row 0 unused, HEAD resolved per pixel)."""
-        return np.array([(0, 0, 0), self.skin, self.hair, self.shirt, self.trousers, self.shoes, self.skin],
-                        np.float32)
+        """(8, 3) float32: row m = albedo of material m (row 0 unused, HEAD resolved per pixel)."""
+        return np.array([(0, 0, 0), self.skin, self.hair, self.shirt, self.trousers, self.shoes, self.skin,
+                         MARKER_RED], np.float32)
 
 
 @dataclass(frozen=True)
@@ -75,6 +81,7 @@ class Capsule:
     radius: float
     label: int
     material: int
+    name: str = ''         # which part of the body (e.g. 'left_thigh', 'marker_left_knee')
 
 
 @dataclass
@@ -84,6 +91,7 @@ class Ellipsoid:
     semi_axes: np.ndarray  # (3,) [m]
     label: int
     material: int
+    name: str = ''
 
 
 def _frame(primary, secondary):
@@ -98,24 +106,33 @@ def _frame(primary, secondary):
 
 
 def body_primitives(pose, appearance):
-    """The solids of a person in `pose` (a list of Capsule and Ellipsoid)."""
+    """The solids of a person in `pose` (a list of Capsule and Ellipsoid), each named after its body
+    part; with `appearance.markers`, also the 15 red marker spheres (named 'marker_<joint>', last)."""
+    solids = _body_solids(pose, appearance)
+    if appearance.markers:
+        solids += marker_solids(marker_centres(pose, appearance, solids))
+    return solids
+
+
+def _body_solids(pose, appearance):
     p, g = pose.joints, appearance.girth
     up = normalize(p[J['neck']] - p[J['pelvis']])
     left = normalize(p[J['left_hip']] - p[J['right_hip']])
     forward = normalize(np.cross(left, up))
     arm_material = SHIRT if appearance.long_sleeves else SKIN
     solids = [
-        Ellipsoid(p[J['pelvis']] + 0.02 * up, _frame(left, up), np.array([0.17, 0.12, 0.10]) * g, LABEL_TORSO, TROUSERS),
+        Ellipsoid(p[J['pelvis']] + 0.02 * up, _frame(left, up), np.array([0.17, 0.12, 0.10]) * g, LABEL_TORSO, TROUSERS,
+                  'pelvis'),
         Ellipsoid(0.5 * (p[J['pelvis']] + p[J['neck']]) - 0.01 * forward, _frame(up, left),
                   np.array([0.5 * np.linalg.norm(p[J['neck']] - p[J['pelvis']]) + 0.03, 0.165 * g, 0.11 * g]),
-                  LABEL_TORSO, SHIRT),
-        Capsule(p[J['left_shoulder']], p[J['right_shoulder']], 0.055 * g, LABEL_TORSO, SHIRT),
+                  LABEL_TORSO, SHIRT, 'torso'),
+        Capsule(p[J['left_shoulder']], p[J['right_shoulder']], 0.055 * g, LABEL_TORSO, SHIRT, 'shoulders'),
         Capsule(p[J['neck']] - 0.03 * up, p[J['head']] - 0.16 * normalize(p[J['head']] - p[J['neck']]), 0.05 * g,
-                LABEL_HEAD, SKIN),
+                LABEL_HEAD, SKIN, 'neck'),
     ]
     head_up = normalize(p[J['head']] - p[J['neck']])
     solids.append(Ellipsoid(p[J['head']] - 0.115 * head_up, _frame(head_up, pose.head_forward),
-                            np.array([0.115, 0.10, 0.08]), LABEL_HEAD, HEAD))
+                            np.array([0.115, 0.10, 0.08]), LABEL_HEAD, HEAD, 'head'))
     for side, arm_label, hand_label, leg_label, toe, tip in (
             ('left', LABEL_LEFT_ARM, LABEL_LEFT_HAND, LABEL_LEFT_LEG, pose.toes[0], pose.hand_tips[0]),
             ('right', LABEL_RIGHT_ARM, LABEL_RIGHT_HAND, LABEL_RIGHT_LEG, pose.toes[1], pose.hand_tips[1])):
@@ -123,15 +140,112 @@ def body_primitives(pose, appearance):
         hip, knee, ankle = (p[J[f'{side}_{n}']] for n in ('hip', 'knee', 'ankle'))
         hand_axis = tip - wrist
         solids += [
-            Capsule(shoulder, elbow, 0.05 * g, arm_label, SHIRT),
-            Capsule(elbow, wrist, 0.038 * g, arm_label, arm_material),
+            Capsule(shoulder, elbow, 0.05 * g, arm_label, SHIRT, f'{side}_upper_arm'),
+            Capsule(elbow, wrist, 0.038 * g, arm_label, arm_material, f'{side}_forearm'),
             Ellipsoid(wrist + 0.45 * hand_axis, _frame(hand_axis, np.cross(hand_axis, up)),
-                      np.array([0.55 * np.linalg.norm(hand_axis), 0.045, 0.02]), hand_label, SKIN),
-            Capsule(hip, knee, 0.07 * g, leg_label, TROUSERS),
-            Capsule(knee, ankle, 0.05 * g, leg_label, TROUSERS),
-            Capsule(ankle + 0.02 * (ankle - toe), toe, 0.045, leg_label, SHOES),
+                      np.array([0.55 * np.linalg.norm(hand_axis), 0.045, 0.02]), hand_label, SKIN, f'{side}_hand'),
+            Capsule(hip, knee, 0.07 * g, leg_label, TROUSERS, f'{side}_thigh'),
+            Capsule(knee, ankle, 0.05 * g, leg_label, TROUSERS, f'{side}_shin'),
+            Capsule(ankle + 0.02 * (ankle - toe), toe, 0.045, leg_label, SHOES, f'{side}_foot'),
         ]
     return solids
+
+
+# Where each joint's marker sits: the body surface seen from the joint along a direction (in the
+# body's frame: forward, left, up; 'lateral' = away from the body's midline, made perpendicular to
+# the named bone), found on the named solids only. Anatomical landmarks of a marker suit: the vertex,
+# the suprasternal notch, the acromia, the lateral epicondyles and styloids, the front of the pelvis,
+# the greater trochanters, the patellae and the lateral malleoli.
+MARKER_PLACEMENT = {
+    'pelvis': (('forward',), None, ('pelvis', 'torso')),
+    'neck': (('forward',), None, ('neck', 'torso', 'shoulders')),
+    'head': (('head_up',), None, ('head',)),
+    **{f'{side}_{joint}': placement for side in ('left', 'right') for joint, placement in (
+        ('hip', (('lateral',), None, ('pelvis', f'{side}_thigh'))),
+        ('knee', (('forward',), (f'{side}_hip', f'{side}_ankle'), (f'{side}_thigh', f'{side}_shin'))),
+        ('ankle', (('lateral',), (f'{side}_knee', f'{side}_ankle'), (f'{side}_shin', f'{side}_foot'))),
+        ('shoulder', (('lateral', 'up'), None, ('shoulders', f'{side}_upper_arm', 'torso'))),
+        ('elbow', (('lateral',), (f'{side}_shoulder', f'{side}_wrist'), (f'{side}_upper_arm', f'{side}_forearm'))),
+        ('wrist', (('lateral',), (f'{side}_elbow', f'{side}_wrist'), (f'{side}_forearm', f'{side}_hand'))))},
+}
+
+
+def marker_centres(pose, appearance=None, solids=None):
+    """(15, 3) [m] centres of the joint markers, JOINT_NAMES order: each joint moved out along its
+    MARKER_PLACEMENT direction to the body's surface, plus MARKER_PROTRUSION marker radii (the head's
+    marker sits on the vertex, which is already on the surface)."""
+    appearance = appearance or Appearance()
+    solids = solids if solids is not None else _body_solids(pose, appearance)
+    by_name = {solid.name: solid for solid in solids}
+    p = pose.joints
+    up = normalize(p[J['neck']] - p[J['pelvis']])
+    left = normalize(p[J['left_hip']] - p[J['right_hip']])
+    basis = {'forward': normalize(np.cross(left, up)), 'up': up,
+             'head_up': normalize(p[J['head']] - p[J['neck']])}
+    centres = np.empty((len(JOINT_NAMES), 3))
+    for name, index in J.items():
+        words, bone, parts = MARKER_PLACEMENT[name]
+        outward = -left if name.startswith('right') else left
+        direction = sum(outward if word == 'lateral' else basis[word] for word in words)
+        if bone is not None:
+            axis = normalize(p[J[bone[1]]] - p[J[bone[0]]])
+            direction = direction - np.dot(direction, axis) * axis
+        direction = normalize(direction)
+        far = p[index] + 1.0 * direction
+        hits = [_intersect(by_name[part], far, -direction[None])[0][0] for part in parts]
+        depth = 1.0 - min(hits) if np.isfinite(min(hits)) else 0.0
+        centres[index] = p[index] + (max(depth, 0.0) + MARKER_PROTRUSION * MARKER_RADIUS) * direction
+    return centres
+
+
+def marker_solids(centres):
+    """The red marker spheres at centres (15, 3), labelled with their joint's body part."""
+    labels = {'pelvis': LABEL_TORSO, 'neck': LABEL_TORSO, 'head': LABEL_HEAD}
+    for side, arm, leg in (('left', LABEL_LEFT_ARM, LABEL_LEFT_LEG), ('right', LABEL_RIGHT_ARM, LABEL_RIGHT_LEG)):
+        labels.update({f'{side}_{j}': arm for j in ('shoulder', 'elbow', 'wrist')})
+        labels.update({f'{side}_{j}': leg for j in ('hip', 'knee', 'ankle')})
+    return [Ellipsoid(np.asarray(centre, float), np.eye(3), np.full(3, MARKER_RADIUS), labels[name], MARKER,
+                      f'marker_{name}') for name, centre in zip(JOINT_NAMES, centres)]
+
+
+def _sphere_disc_rays(origin, centre, radius, count):
+    """`count` unit rays from `origin` spread evenly (a sunflower) over the disc the sphere covers."""
+    axis = centre - origin
+    distance = np.linalg.norm(axis)
+    half_angle = np.arcsin(min(radius / distance, 1.0)) * 0.98
+    frame = _frame(axis, np.array([0.0, 0.0, 1.0]))
+    k = np.arange(count) + 0.5
+    rho = np.tan(half_angle) * np.sqrt(k / count)
+    phi = k * np.pi * (3 - np.sqrt(5))
+    directions = frame[:, [0]] + frame[:, [1]] * rho * np.cos(phi) + frame[:, [2]] * rho * np.sin(phi)
+    return normalize(directions.T)
+
+
+def marker_visibility(camera, pose, appearance, samples=64):
+    """Ground truth of the markers in one camera: pixels (15, 2) of the marker centres' true
+    projections (with the lens' distortion), the visible fraction (15,) of each marker's disc (rays
+    from the camera centre over the disc whose first hit, among the body and all markers, is that
+    marker) and visible (15,) bool: fraction >= MARKER_MIN_VISIBLE and the centre inside the image."""
+    solids = body_primitives(pose, replace(appearance, markers=True))
+    marker_numbers = [number for number, solid in enumerate(solids) if solid.material == MARKER]
+    markers = [solids[number] for number in marker_numbers]
+    origin = camera.center
+    pixels, depth = camera.project(np.array([m.center for m in markers]))
+    fractions = np.zeros(len(markers))
+    for index, marker in enumerate(markers):
+        if depth[index] <= 0:
+            continue
+        rays = _sphere_disc_rays(origin, marker.center, MARKER_RADIUS, samples)
+        nearest = np.full(len(rays), np.inf)
+        nearest_solid = np.full(len(rays), -1)
+        for number, solid in enumerate(solids):
+            t = _intersect(solid, origin, rays)[0]
+            nearer = t < nearest
+            nearest[nearer], nearest_solid[nearer] = t[nearer], number
+        fractions[index] = np.mean(nearest_solid == marker_numbers[index])
+    inside = (depth > 0) & (pixels[:, 0] >= -0.5) & (pixels[:, 0] <= camera.width - 0.5) & \
+             (pixels[:, 1] >= -0.5) & (pixels[:, 1] <= camera.height - 0.5)
+    return pixels, fractions, inside & (fractions >= MARKER_MIN_VISIBLE)
 
 
 def _bounding_sphere(solid):
@@ -252,9 +366,11 @@ def shadow_map(solids, center_xy):
 @dataclass
 class Rendering:
     """One camera's view of one frame: linear RGB (H, W, 3) float32 and the ground-truth label mask
-    (H, W) uint8: body-part LABEL_* value, with SKIN_BIT set on skin; 0 = background."""
+    (H, W) uint8: body-part LABEL_* value, with SKIN_BIT set on skin; 0 = background. With markers,
+    marker_ids (H, W) int8: the JOINT_NAMES index of the marker seen at each pixel, −1 elsewhere."""
     rgb: np.ndarray
     labels: np.ndarray
+    marker_ids: np.ndarray = None
 
 
 def render(view, pose, appearance, shadow=None, shadow_center=None, soft_shading=True):
@@ -264,9 +380,10 @@ def render(view, pose, appearance, shadow=None, shadow_center=None, soft_shading
     normals = np.zeros((height, width, 3), np.float32)
     materials = np.zeros((height, width), np.uint8)
     labels = np.zeros((height, width), np.uint8)
+    which = np.full((height, width), -1, np.int16)
     origin = camera.center
     solids = body_primitives(pose, appearance)
-    for solid in solids:
+    for number, solid in enumerate(solids):
         box = _screen_box(camera, *_bounding_sphere(solid))
         if box is None:
             continue
@@ -279,6 +396,11 @@ def render(view, pose, appearance, shadow=None, shadow_center=None, soft_shading
         normals[r0:r1, c0:c1][nearer] = n.reshape(r1 - r0, c1 - c0, 3)[nearer]
         materials[r0:r1, c0:c1][nearer] = solid.material
         labels[r0:r1, c0:c1][nearer] = solid.label
+        which[r0:r1, c0:c1][nearer] = number
+    marker_ids = None
+    if appearance.markers:  # body_primitives puts the markers last, in JOINT_NAMES order
+        first_marker = len(solids) - len(JOINT_NAMES)
+        marker_ids = np.where(materials == MARKER, which - first_marker, -1).astype(np.int8)
     person = materials > 0
     _resolve_hair(materials, normals, pose, person)
     albedo = appearance.palette()[materials]
@@ -296,7 +418,7 @@ def render(view, pose, appearance, shadow=None, shadow_center=None, soft_shading
         scene *= (1 - np.where(floor, darkening, 0))[..., None]
     scene[person] = shaded[person]
     labels[(materials == SKIN)] |= SKIN_BIT
-    return Rendering(scene, labels)
+    return Rendering(scene, labels, marker_ids)
 
 
 def _resolve_hair(materials, normals, pose, person):

@@ -1,6 +1,11 @@
 """`synth`: an i3DPost-like multi-camera bag of a person walking (or standing) in a blue studio,
 with exact ground truth; optionally also written in the i3DPost dataset layout.
 
+--markers dresses the person in paper 001's marker suit: 4 cm red spheres on the body's surface at
+the 15 joints (studio.marker_centres), clothes without red, and per camera the markers' ground truth
+(/cam<K>/ground_truth/markers: true projections, visible where >= 25 % of a marker's disc is seen).
+--motion occlusions is a scripted sequence of the paper's occlusion cases (scripted_motion).
+
 The motion is real motion capture (CMU clips, retargeted to the 15-joint model at 25 fps); the
 person and studio are ray cast by `studio`; every random choice comes from --seed, so a seed
 gives the same bag. Topics and stamps follow camera_bag.
@@ -30,18 +35,25 @@ def build_parser(prog):
                         help='bag directory to create (default bags/i3dpost_walk_synth)')
     parser.add_argument('--cameras', type=int, nargs='+', default=list(range(1, 9)), metavar='K',
                         help='i3DPost camera numbers 1..8 (default all 8; the paper uses 3 5 7)')
-    parser.add_argument('--frames', default=DEFAULT_FRAMES, help=f'frame range, e.g. 52-101 (default {DEFAULT_FRAMES})')
+    parser.add_argument('--frames', help=f'frame range, e.g. 52-101 (default {DEFAULT_FRAMES}; with --motion '
+                                          'occlusions the whole script, frames 0-247)')
     parser.add_argument('--resolution', default='1920x1080', help='WIDTHxHEIGHT (default 1920x1080)')
     parser.add_argument('--seed', type=int, default=0, help='seed of every random choice (default 0)')
-    parser.add_argument('--motion', choices=['walk', 'stand'], default='walk', help='walk (default) or stand still')
+    parser.add_argument('--motion', choices=['walk', 'stand', 'occlusions'], default='walk',
+                        help='walk (default), stand still, or occlusions: a scripted sequence of marker occlusions '
+                             '(a hand in front of the head, shrug with arms crossed, wrists past the hips, knees '
+                             'crossing), standing in the middle facing camera 5')
     parser.add_argument('--clip', default='07_01', help='CMU clip of the motion: 07_01 (default), 07_02, 08_08')
     body = parser.add_argument_group('the person')
     body.add_argument('--height', type=float, default=1.75, help='[m] standing height (default 1.75)')
     body.add_argument('--girth', type=float, default=1.0, help='scale of limb and torso thickness (default 1)')
     body.add_argument('--long-sleeves', action='store_true', help='forearms covered: only hands and face are skin')
     body.add_argument('--skin-tone', choices=['light', 'medium', 'dark'], default='medium', help='(default medium)')
-    body.add_argument('--shirt', choices=['red', 'green', 'grey', 'white', 'yellow'], default='red',
-                      help='shirt colour (default red)')
+    body.add_argument('--shirt', choices=['red', 'green', 'grey', 'white', 'yellow'],
+                      help='shirt colour (default red; green with --markers)')
+    body.add_argument('--markers', action='store_true',
+                      help="red 4 cm marker spheres on the 15 joints (paper 001), no red clothes, and the markers' "
+                           'ground truth per camera on /cam<K>/ground_truth/markers')
     realism = parser.add_argument_group('realism (on by default; each can be turned off)')
     realism.add_argument('--no-soft-shading', action='store_true', help='flat colours instead of shaded solids')
     realism.add_argument('--no-shadow', action='store_true', help='no shadow on the floor')
@@ -81,7 +93,8 @@ _SETTINGS = None  # set in the parent before the worker pool forks
 
 
 def render_frame(frame):
-    """(frame number, [(camera number, image CDR, label mask CDR)]) of one (frame number, BodyPose)."""
+    """(frame number, [(camera number, image CDR, label mask CDR, MarkerTracks CDR or None)]) of one
+    (frame number, BodyPose)."""
     from rclpy.serialization import serialize_message
     from mvpose_nodes import studio
     from mvpose_nodes.camera_bag import frame_stamp_ns
@@ -94,6 +107,17 @@ def render_frame(frame):
         shadow = studio.shadow_map(studio.body_primitives(pose, settings.appearance), center)
     outputs = []
     for view in settings.views:
+        markers = None
+        if settings.appearance.markers:
+            from mvpose_msgs.msg import MarkerTracks
+            from std_msgs.msg import Header
+            from mvpose_nodes.rosconv import marker_tracks, optical_frame, set_stamp
+            pixels, _, visible = studio.marker_visibility(view.camera, pose, settings.appearance)
+            header = Header()
+            set_stamp(header, frame_stamp_ns(number), optical_frame(view.camera.number))
+            # Ground truth: FLAG_DETECTED where the marker is visible, FLAG_PREDICTED where it is hidden.
+            markers = serialize_message(marker_tracks(header, pixels, np.where(
+                visible, MarkerTracks.FLAG_DETECTED, MarkerTracks.FLAG_PREDICTED)))
         rendering = studio.render(view, pose, settings.appearance, shadow, center, settings.soft_shading)
         rgb, labels = settings.realism.finish(rendering, view, view.camera.number, settings.seed, number)
         if settings.layout_sequence is not None:
@@ -102,7 +126,7 @@ def render_frame(frame):
         stamp = frame_stamp_ns(number)
         image = compressed_image(rgb, view.camera.number, stamp, settings.image_format, settings.jpeg_quality)
         outputs.append((view.camera.number, serialize_message(image),
-                        serialize_message(compressed_labels(labels, view.camera.number, stamp))))
+                        serialize_message(compressed_labels(labels, view.camera.number, stamp)), markers))
     return number, outputs
 
 
@@ -110,7 +134,13 @@ def make_motion(args):
     from mvpose_nodes.camera_bag import FRAME_RATE
     from mvpose_nodes.i3dpost import parse_frame_range
     from mvpose_nodes.mocap import cmu_clip, load_bvh, retarget, standing_motion
-    first, last = parse_frame_range(args.frames)
+    if args.motion == 'occlusions':
+        from mvpose_nodes.scripted_motion import occlusion_motion
+        script = occlusion_motion(FRAME_RATE, height=args.height)
+        if getattr(args, 'frames', None) is None:
+            return script
+        return script.select(*parse_frame_range(args.frames))
+    first, last = parse_frame_range(args.frames or DEFAULT_FRAMES)
     bvh = load_bvh(cmu_clip(args.clip))
     if args.motion == 'stand':
         return standing_motion(bvh, last - first + 1, height=args.height, frame_rate=FRAME_RATE,
@@ -154,6 +184,9 @@ def main(argv=None, prog='synth'):
         bad = [k for k in args.cameras if not 1 <= k <= 8]
         if bad or len(set(args.cameras)) != len(args.cameras):
             raise UserError(f'--cameras takes distinct i3DPost camera numbers 1..8 (got {args.cameras})')
+        from mvpose_nodes.studio import RED_SHIRTS
+        if args.markers and args.shirt in RED_SHIRTS:
+            raise UserError(f'--shirt {args.shirt} with --markers: the markers are red, choose another shirt')
         synthesize(args)
     return 0
 
@@ -179,22 +212,28 @@ def synthesize(args):
           f'-> {args.output}', file=sys.stderr, flush=True)
     _SETTINGS = SynthSettings(
         views=[studio.prepare_camera(camera, texture_seed=camera.number) for camera in selected],
-        appearance=studio.Appearance(skin=studio.SKIN_TONES[args.skin_tone], shirt=studio.SHIRTS[args.shirt],
-                                     long_sleeves=args.long_sleeves, girth=args.girth),
+        appearance=studio.Appearance(skin=studio.SKIN_TONES[args.skin_tone],
+                                     shirt=studio.SHIRTS[args.shirt or ('green' if args.markers else 'red')],
+                                     long_sleeves=args.long_sleeves, girth=args.girth, markers=args.markers),
         realism=studio.Realism(args.exposure_variation, args.white_balance_variation, args.noise, args.blur),
         seed=args.seed, soft_shading=not args.no_soft_shading, shadow=not args.no_shadow,
         image_format=args.image_format, jpeg_quality=args.jpeg_quality, layout_sequence=layout_sequence)
     frames = [(number, studio.BodyPose(motion.joints[i], motion.toes[i], motion.hand_tips[i], motion.head_forward[i]))
               for i, number in enumerate(motion.frame_numbers)]
+    appearance = _SETTINGS.appearance
     with CameraBagWriter(args.output, [c for c in stated if c.number in args.cameras], frames[0][0],
-                         ground_truth=True) as bag:
+                         ground_truth=True, markers=appearance.markers) as bag:
         progress = Progress(len(frames), 'synth')
         with ProcessPoolExecutor(max_workers=max(1, args.jobs), mp_context=multiprocessing.get_context('fork')) as pool:
             for (number, outputs), (_, pose) in zip(pool.map(render_frame, frames), frames):
-                for camera_number, image, labels in outputs:
+                for camera_number, image, labels, markers in outputs:
                     bag.write_image(camera_number, number, image)
                     bag.write_image(camera_number, number, labels, kind='labels')
+                    if markers is not None:
+                        bag.write_markers(camera_number, number, markers)
                 bag.write_ground_truth(number, pose.joints)
+                if appearance.markers:
+                    bag.write_marker_centres(number, studio.marker_centres(pose, appearance))
                 progress.update()
         elapsed = progress.close()
     print(f'[synth] wrote {args.output} in {elapsed:.1f} s ({len(frames)} frames × {len(selected)} cameras)',

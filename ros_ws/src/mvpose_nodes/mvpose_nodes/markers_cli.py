@@ -1,0 +1,136 @@
+"""`markers eval BAG`: marker mode (paper 001) against a synthetic marker bag's ground truth.
+
+Per camera, the region-constrained tracker (markers.MarkerTracker) and the nearest-neighbour baseline
+(markers.NearestNeighbourTracker) run over the bag's images, both initialised from the first frame's
+ground-truth markers (standing in for an operator's labelling of the calibration frame). Printed per
+marker: the mean and max 2D error [px] where the marker is visible and where it is hidden (the
+tracker's prediction), and identity swaps; then the markers triangulated across cameras
+(marker_triangulation) against the 3D ground truth [mm].
+"""
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from mvpose_nodes.errors import ArgumentParser, UserError, exit_on_user_error
+
+SWAP_RATIO = 2.0     # a marker nearer another marker's true position than this times its own error ...
+SWAP_MIN_PX = 5.0    # ... and more than this far from its own: an identity swap
+TARGETS = {'swaps': 0, 'visible': 2.0, 'predicted': 6.0}   # issue 7's targets [-, px, px]
+
+
+def markers_main(argv=None, prog='markers'):
+    parser = ArgumentParser(prog=prog, description=__doc__.split('\n\n')[0])
+    commands = parser.add_subparsers(dest='command', metavar='COMMAND', required=True)
+    evaluate = commands.add_parser('eval', help='marker tracking against a synthetic marker bag',
+                                   description=__doc__.split('\n\n')[1])
+    evaluate.add_argument('bag', type=Path, help='a bag made by ./mvpose synth --markers')
+    evaluate.add_argument('--cameras', type=int, nargs='+', metavar='K', help='cameras to track (default: all in the bag)')
+    args = parser.parse_args(sys.argv[1:] if argv is None else argv)
+    with exit_on_user_error(prog):
+        evaluate_bag(args.bag, args.cameras)
+    return 0
+
+
+def evaluate_bag(bag, cameras=None):
+    from mvpose_nodes.body_model import JOINT_NAMES
+    from mvpose_nodes.camera_bag import frame_sets
+    from mvpose_nodes.markers import MarkerTracker, NearestNeighbourTracker
+    from mvpose_nodes.progress import Progress
+
+    methods = {'regions (paper 001)': MarkerTracker, 'nearest neighbour': NearestNeighbourTracker}
+    trackers, results, truth_3d, camera_of = {}, {m: {} for m in methods}, [], {}
+    sets = list(frame_sets(bag, cameras))
+    if not sets or not any(getattr(s, 'markers', None) for s in sets):
+        raise UserError(f"bag '{bag}' has no ground-truth markers (/cam<K>/ground_truth/markers): "
+                        "make one with ./mvpose synth --markers")
+    progress = Progress(len(sets), 'markers eval')
+    for frame_set in sets:
+        truth_3d.append(frame_set.marker_centres if frame_set.marker_centres is not None else frame_set.truth)
+        for number, image in sorted(frame_set.images.items()):
+            if number not in frame_set.markers:
+                continue
+            true_positions, visible = frame_set.markers[number]
+            camera_of[number] = frame_set.cameras[number]
+            for method, make in methods.items():
+                tracker = trackers.get((method, number))
+                if tracker is None:
+                    tracker = trackers[(method, number)] = make()
+                    tracker.initialise(image, true_positions, visible)
+                positions, flags = tracker.track(image)
+                results[method].setdefault(number, []).append((positions, flags, true_positions, visible))
+        progress.update()
+    progress.close()
+    report(bag, results, camera_of, truth_3d, JOINT_NAMES)
+
+
+def errors_and_swaps(runs):
+    """From [(positions (15, 2), flags (15,), true (15, 2), visible (15,) bool)] over frames (one camera):
+    errors (F, 15) [px], visible (F, 15) bool, swapped (F, 15) bool (a marker nearer another marker's true
+    position than SWAP_RATIO times its own error, and more than SWAP_MIN_PX off)."""
+    positions = np.array([r[0] for r in runs])
+    true = np.array([r[2] for r in runs])
+    visible = np.array([r[3] for r in runs], bool)
+    errors = np.linalg.norm(positions - true, axis=2)
+    to_others = np.linalg.norm(positions[:, :, None] - true[:, None], axis=3)   # (F, estimate, truth)
+    count = positions.shape[1]
+    to_others[:, np.arange(count), np.arange(count)] = np.inf
+    swapped = (SWAP_RATIO * to_others.min(axis=2) < errors) & (errors > SWAP_MIN_PX)
+    return errors, visible, swapped
+
+
+def swap_events(swapped):
+    """Identity swaps counted once each: per marker, the frames where a swap begins. swapped (F, M) bool."""
+    begins = swapped & ~np.vstack([np.zeros((1, swapped.shape[1]), bool), swapped[:-1]])
+    return int(begins.sum())
+
+
+def report(bag, results, camera_of, truth_3d, names):
+    from mvpose_nodes.marker_triangulation import triangulate_markers
+    methods = list(results)
+    summary = {}
+    print(f'markers eval: {bag}  (cameras {" ".join(map(str, sorted(camera_of)))}, {len(truth_3d)} frames)   '
+          f'2D errors [px] against the true marker centres; "hidden" = the prediction while the marker is occluded')
+    print(f'  {"":<16}' + ''.join(f'{m:<42}' for m in methods))
+    print(f'  {"marker":<16}' + f'{"visible mean  max  hidden mean  max  swaps":<42}' * len(methods))
+    per_method = {}
+    for method in methods:
+        per_camera = [errors_and_swaps(runs) for runs in results[method].values()]
+        errors = np.concatenate([e for e, _, _ in per_camera])
+        visible = np.concatenate([v for _, v, _ in per_camera])
+        swaps = np.array([[swap_events(s[:, [m]]) for m in range(len(names))] for _, _, s in per_camera]).sum(axis=0)
+        per_method[method] = errors, visible, swaps
+
+    def cells(values):
+        return (f'{values.mean():6.1f} {values.max():5.1f}' if len(values) else f'{"–":>6} {"–":>5}')
+    for m, name in enumerate(names):
+        row = f'  {name:<16}'
+        for method in methods:
+            errors, visible, swaps = per_method[method]
+            row += (f'{cells(errors[visible[:, m], m]):>12}  {cells(errors[~visible[:, m], m]):>11}  '
+                    f'{swaps[m]:>4}').ljust(42)
+        print(row)
+    print(f'  {"all":<16}' + ''.join(
+        (f'{cells(e[v]):>12}  {cells(e[~v]):>11}  {s.sum():>4}').ljust(42) for e, v, s in per_method.values()))
+    for method in methods:
+        errors, visible, swaps = per_method[method]
+        cameras = sorted(results[method])
+        frames = min(len(results[method][k]) for k in cameras)
+        joints = []
+        previous = None
+        for f in range(frames):
+            runs = [results[method][k][f] for k in cameras]
+            estimate, _ = triangulate_markers([camera_of[k] for k in cameras], [r[0] for r in runs],
+                                              [r[1] for r in runs], previous)
+            previous = estimate if np.all(np.isfinite(estimate)) else previous
+            joints.append(estimate)
+        truth = np.array(truth_3d[:frames], dtype=float)
+        error_3d = 1000 * np.linalg.norm(np.array(joints) - truth, axis=2)
+        summary[method] = (errors[visible].mean() if visible.any() else np.nan,
+                           errors[~visible].mean() if (~visible).any() else np.nan, int(swaps.sum()),
+                           np.nanmean(error_3d), np.nanmax(error_3d))
+    print('  totals                 visible mean [px]  hidden mean [px]  identity swaps  3D triangulated mean / max [mm]')
+    for method, (v, h, s, mean_3d, max_3d) in summary.items():
+        print(f'  {method:<22} {v:>12.2f} {h:>17.2f} {s:>15d}   {mean_3d:>10.1f} / {max_3d:.1f}')
+    print(f'  targets: {TARGETS["swaps"]} identity swaps, visible mean <= {TARGETS["visible"]} px, '
+          f'hidden (predicted) mean <= {TARGETS["predicted"]} px')
