@@ -94,6 +94,7 @@ class MarkerSettings:
     init_gate_fraction: float = 0.2         # initial positions snap to detections within this × torso length
     predict_region_motion: bool = False     # start each region's search at its previous centre + previous S
     max_predicted_frames: int = 25          # predicted longer than this → FLAG_LOST
+    redness_weight: float = 2.0             # the tracking image adds this × max(0, r − max(g, b)): markers stand out
     # Background
     chroma_key: bool = True                 # mask the blue screen to 0 in the templates' grey image
     chroma_threshold: float = BLUENESS_THRESHOLD
@@ -129,6 +130,9 @@ def tracking_image(rgb, settings=MarkerSettings()):
     if rgb.ndim == 2:
         return rgb.astype(np.float32)
     grey = cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY).astype(np.float32)
+    if settings.redness_weight:
+        channels = rgb.astype(np.float32)
+        grey += settings.redness_weight * np.maximum(channels[..., 0] - np.maximum(channels[..., 1], channels[..., 2]), 0)
     if settings.chroma_key:
         grey[~chroma_key_foreground(rgb, settings.chroma_threshold)] = 0.0
     return grey
