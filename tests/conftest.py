@@ -67,10 +67,15 @@ class Background:
             os.killpg(self.process.pid, signal.SIGINT)
         return self.finish(timeout)
 
-    def kill(self):
+    def kill(self, grace=10):
+        """Ctrl-C first (a launch then stops its nodes, which run in sessions of their own), then SIGKILL."""
         if self.process.poll() is None:
-            os.killpg(self.process.pid, signal.SIGKILL)
-            self.process.communicate()
+            os.killpg(self.process.pid, signal.SIGINT)
+            try:
+                self.process.communicate(timeout=grace)
+            except subprocess.TimeoutExpired:
+                os.killpg(self.process.pid, signal.SIGKILL)
+                self.process.communicate()
 
 
 @pytest.fixture

@@ -3,6 +3,7 @@
 Runtime tests start the launcher as a subprocess (it installs signal handlers) with small Python
 scripts as its processes, so no ROS node is needed.
 """
+import os
 import shlex
 import signal
 import subprocess
@@ -179,6 +180,28 @@ nodes:
     assert '[first] got SIGINT' in rest.splitlines()
     assert '[second] got SIGINT' in rest.splitlines()
     assert 'Traceback' not in stderr
+
+
+def test_a_killed_launcher_leaves_no_process_behind(tmp_path, child):
+    """Its processes run in sessions of their own (a terminal's Ctrl-C reaches them through the
+    launcher); if the launcher is SIGKILLed they still end (SIGTERM on the parent's death)."""
+    path = write_launch_file(tmp_path, f'''
+nodes:
+  - {{name: first, cmd: {child()}}}
+''')
+    launcher = start_launcher(path, *TIMEOUTS)
+    lines = read_until(launcher, ['[first] ready'])
+    pid = int(next(line for line in lines if line.startswith('[launch] started first')).split('pid ')[1].rstrip(')'))
+    launcher.kill()
+    launcher.communicate()
+    deadline = time.monotonic() + 5
+    while time.monotonic() < deadline and os.path.exists(f'/proc/{pid}') and \
+            open(f'/proc/{pid}/stat').read().split()[2] != 'Z':
+        time.sleep(0.05)
+    alive = os.path.exists(f'/proc/{pid}') and open(f'/proc/{pid}/stat').read().split()[2] != 'Z'
+    if alive:
+        os.kill(pid, signal.SIGKILL)
+    assert not alive, 'the launched process outlived its killed launcher'
 
 
 def test_processes_ignoring_sigint_get_sigterm_then_sigkill_and_exit_code_is_1(tmp_path, child):

@@ -42,6 +42,7 @@ Exit codes:
 """
 import argparse
 import contextlib
+import ctypes
 import math
 import os
 import shlex
@@ -66,6 +67,7 @@ EXIT_PROCESS_FAILED = 1  # also: stopping needed more than SIGINT
 EXIT_REQUIRED_ENDED = 100  # + the 1-based position of the required process
 EXIT_INTERRUPTED = 130
 POLL_INTERVAL = 0.05  # seconds between looks at the children: short enough that reactions feel immediate
+PR_SET_PDEATHSIG = 1     # linux/prctl.h
 DRAIN_TIMEOUT = 1.0  # a grandchild may hold an ended child's output pipe open; don't wait for it for ever
 
 
@@ -206,6 +208,12 @@ def _parameter_arguments(parameters, base_dir):
     return arguments
 
 
+def _end_with_parent():
+    """In a child before exec: SIGTERM it when the launching process dies, however it dies (Linux
+    prctl PR_SET_PDEATHSIG), so that a killed launch leaves no nodes behind in their own sessions."""
+    ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
+
+
 class Launch:
     """Runs process specs (from load_launch_file or process_specs) and supervises them.
 
@@ -236,7 +244,7 @@ class Launch:
             try:
                 popen = subprocess.Popen(spec.command, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
                                          stderr=subprocess.STDOUT, env=environment, text=True, errors='replace',
-                                         start_new_session=True)
+                                         start_new_session=True, preexec_fn=_end_with_parent)
             except OSError as error:
                 self.stop()
                 raise UserError(f"cannot start '{spec.name}': {error.strerror}") from None
