@@ -376,3 +376,25 @@ def test_detect_markers_merges_overlapping_markers_and_drops_specks():
     found = detect_markers(image)
     assert len(found) == 1
     np.testing.assert_allclose(found[0], [33.0, 50.0], atol=0.5)
+
+
+def test_region_motion_is_checked_against_its_markers():
+    """The matched displacement S is kept when the region's markers moved by it; a match that slid
+    (along plain clothes) gives way to no motion, or to the last frame's S, whichever the markers'
+    detections support best."""
+    from types import SimpleNamespace
+    tracker = MarkerTracker()
+    rng = np.random.default_rng(4)
+    tracker.positions = rng.uniform(100, 300, (15, 2))
+    from mvpose_nodes.markers import REGION_INDICES
+    hips = list(REGION_INDICES['hips'])
+    tracker.box_sizes = {'hips': np.array([1.0, 1.0])}
+    tracker.trackers = {'hips': SimpleNamespace(size=np.array([60.0, 40.0]))}   # gate (60 + 40) / 4 = 25 px
+    tracker.regions = {'hips': {'S': np.array([12.0, 0.0])}}
+    markers = tracker.positions[hips]
+    np.testing.assert_array_equal(tracker._checked_displacement('hips', np.array([5.0, -3.0]), markers + [5, -3]),
+                                  [5.0, -3.0])                                    # moved as matched
+    np.testing.assert_array_equal(tracker._checked_displacement('hips', np.array([40.0, 0.0]), markers + 0.5),
+                                  [0.0, 0.0])                                     # the match slid; they stayed
+    np.testing.assert_array_equal(tracker._checked_displacement('hips', np.array([-40.0, 0.0]), markers + [12, 1]),
+                                  [12.0, 0.0])                                    # they went on as before

@@ -23,6 +23,9 @@ Choices the paper leaves open, fixed here (MarkerSettings holds the numbers):
   Range: the centre stays within ± one window width of the previous centre horizontally (a range of
   twice the width) and on its side of the shoulders region's centre vertically (head above,
   hips below); the shoulders region is tracked first.
+- Checked motion (beyond the paper): the matched displacement S is kept only if the region's markers,
+  moved by it, find at least as many detections within the region's gate as with no motion or with
+  the last frame's S (`check_region_motion`); grey templates of plain clothes slide.
 - Template update (α = 0.9): T_t = α·T_{t−1} + (1 − α)·W_t, W_t the matched window (at the chosen
   centre and size, resampled on the template grid); skipped when the match's NCC is below
   `template_update_min_ncc` (an occluded region does not overwrite its template).
@@ -93,6 +96,7 @@ class MarkerSettings:
     limb_gate_fraction: float = 0.4         # limb/baseline gate [× initial torso length]
     init_gate_fraction: float = 0.2         # initial positions snap to detections within this × torso length
     predict_region_motion: bool = False     # start each region's search at its previous centre + previous S
+    check_region_motion: bool = True        # keep S only if its markers' detections agree best (_checked_displacement)
     max_predicted_frames: int = 25          # predicted longer than this → FLAG_LOST
     redness_weight: float = 2.0             # the tracking image adds this × max(0, r − max(g, b)): markers stand out
     # Background
@@ -462,7 +466,13 @@ class MarkerTracker(_TrackerBase):
                 middle = self.regions['shoulders']['centre'][1]
                 y_range = (None, middle - 1.0) if side == 'above' else (middle + 1.0, None)
             centre, _, score = tracker.track(image, x_range, y_range)
-            self.regions[region] = self._region_record(region, centre - before, score)
+            displacement = centre - before
+            if s.check_region_motion:
+                checked = self._checked_displacement(region, displacement, detections)
+                if checked is not displacement:
+                    tracker.centre = before + checked
+                    displacement = checked
+            self.regions[region] = self._region_record(region, displacement, score)
 
         positions = np.zeros_like(self.positions)
         flags = np.full(len(MARKER_NAMES), FLAG_PREDICTED, np.uint8)
@@ -500,3 +510,22 @@ class MarkerTracker(_TrackerBase):
         height, width = rgb.shape[:2]
         positions = np.clip(positions, 0, (width - 1, height - 1))  # a prediction never leaves the image
         return self._finish(positions, flags)
+
+    def _checked_displacement(self, region, displacement, detections):
+        """The template match's displacement S, or no motion, or the last frame's S, whichever explains
+        the region's markers best: the most of them (moved by it) with a detection within the region's
+        gate (h_x + h_y)/4, then the smaller summed distance, then that order. A template that slid along
+        plain clothes would otherwise carry the markers' search windows away from them."""
+        if not len(detections):
+            return displacement
+        indices = list(REGION_INDICES[region])
+        box = self.box_sizes[region] * self.trackers[region].size
+        gate = max(float(box.sum()) / 4.0, self.settings.min_region_px)
+
+        def support(shift):
+            distance = np.linalg.norm(self.positions[indices] + shift - detections[:, None], axis=2).min(axis=0)
+            near = distance < gate
+            return int(near.sum()), -float(distance[near].sum())
+        candidates = [displacement, np.zeros(2), self.regions[region]['S']]   # matched, still, as before
+        best = max(range(len(candidates)), key=lambda k: (support(candidates[k]), -k))
+        return displacement if best == 0 else np.asarray(candidates[best], np.float64).copy()
