@@ -41,7 +41,9 @@ Choices the paper leaves open, fixed here (MarkerSettings holds the numbers):
 - Region 1: the unused detections in its search window: one → the head; several → the nearest to
   p_{t−1,head} + S_1; none → p_{t−1,head} + S_1 (predicted).
 - Limbs and the baseline: p_{t−1} + (p_{t−1} − p_{t−2}), Hungarian on distance to the remaining
-  detections, gated at `limb_gate_fraction` × the initial torso length |neck − pelvis|.
+  detections, gated at `limb_gate_fraction` × the initial torso length |neck − pelvis|. The region
+  tracker's hidden limb markers (`carry_hidden_limbs`) move with their region instead (hips for the
+  legs, shoulders for the arms): over a long occlusion a velocity runs away.
 - A marker predicted for more than `max_predicted_frames` frames in a row is FLAG_LOST; its last
   position is still reported (and held: its velocity is zeroed) so that it can be re-acquired.
 
@@ -98,6 +100,7 @@ class MarkerSettings:
     predict_region_motion: bool = False     # start each region's search at its previous centre + previous S
     check_region_motion: bool = True        # keep S only if its markers' detections agree best (_checked_displacement)
     max_predicted_frames: int = 25          # predicted longer than this → FLAG_LOST
+    carry_hidden_limbs: bool = True         # a hidden limb marker moves with its region, not its own velocity
     redness_weight: float = 2.0             # the tracking image adds this × max(0, r − max(g, b)): markers stand out
     # Background
     chroma_key: bool = True                 # mask the blue screen to 0 in the templates' grey image
@@ -500,7 +503,7 @@ class MarkerTracker(_TrackerBase):
 
         limbs = list(LIMB_INDICES)
         free = np.flatnonzero(~used)
-        predicted = self._constant_velocity(limbs)
+        predicted = self._limb_predictions(limbs)
         match = gated_assignment(predicted, detections[free], self.limb_gate)
         positions[limbs] = predicted
         for row, col in enumerate(match):
@@ -529,3 +532,17 @@ class MarkerTracker(_TrackerBase):
         candidates = [displacement, np.zeros(2), self.regions[region]['S']]   # matched, still, as before
         best = max(range(len(candidates)), key=lambda k: (support(candidates[k]), -k))
         return displacement if best == 0 else np.asarray(candidates[best], np.float64).copy()
+
+    def _limb_predictions(self, limbs):
+        """Predicted positions (L, 2) [px] of limb markers: seen last frame, constant velocity; hidden,
+        carried by their region (the hips for legs, the shoulders for arms) without their own velocity,
+        which runs away over a long occlusion (beyond the paper, which predicts by velocity)."""
+        velocity = self._constant_velocity(limbs)
+        if not self.settings.carry_hidden_limbs:
+            return velocity
+        predicted = velocity.copy()
+        for row, index in enumerate(limbs):
+            if self.predicted_run[index]:
+                region = 'hips' if MARKER_NAMES[index].endswith(('knee', 'ankle')) else 'shoulders'
+                predicted[row] = self.positions[index] + self.regions[region]['S']
+        return predicted
