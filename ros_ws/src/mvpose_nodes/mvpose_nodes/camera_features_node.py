@@ -18,7 +18,7 @@ from mvpose_nodes.errors import UserError
 from mvpose_nodes.features import FeatureExtractor, draw_features
 from mvpose_nodes.rosconv import (empty_feature_messages, feature_messages, image_from_compressed, image_from_raw,
                                   rgb_image)
-from mvpose_nodes.rosutil import LATCHED, camera_of_namespace, run_node
+from mvpose_nodes.rosutil import LATCHED, ReportOnce, camera_of_namespace, run_node
 from mvpose_nodes.silhouette import BackgroundModel
 from mvpose_nodes.skin import SkinModel
 from mvpose_nodes.skin_cli import default_model_path
@@ -39,7 +39,7 @@ def descriptor(parameter):
     return result
 
 
-class CameraFeaturesNode(Node):
+class CameraFeaturesNode(ReportOnce, Node):
     def __init__(self):
         super().__init__('camera_features')
         self.camera = camera_of_namespace(self.get_namespace(), 'camera_features')
@@ -52,7 +52,6 @@ class CameraFeaturesNode(Node):
         self.extractor = self.make_extractor(self.values)
         self.add_on_set_parameters_callback(self.on_set_parameters)
         self.camera_info = None
-        self.reported = set()
         self.background_frames = []
         self.silhouette_publisher = self.create_publisher(Image, 'silhouette', STREAM_DEPTH)
         self.ellipses_publisher = self.create_publisher(SkinEllipseArray, 'skin_ellipses', STREAM_DEPTH)
@@ -84,12 +83,6 @@ class CameraFeaturesNode(Node):
             return SetParametersResult(successful=False, reason=str(error))
         self.values, self.background_frames = values, []
         return SetParametersResult(successful=True)
-
-    def report_once(self, cause, text):
-        """Log a problem the first time each cause occurs (a stream of bad frames logs once)."""
-        if cause not in self.reported:
-            self.reported.add(cause)
-            self.get_logger().warning(text)
 
     def on_camera_info(self, message):
         if message.width <= 0 or message.height <= 0:

@@ -17,7 +17,7 @@ from sensor_msgs.msg import CompressedImage, Image
 from mvpose_nodes.errors import UserError
 from mvpose_nodes.markers import FLAG_LOST, MarkerTracker, NearestNeighbourTracker
 from mvpose_nodes.rosconv import image_from_compressed, image_from_raw, marker_tracks, stamp_ns, tracks_from_message
-from mvpose_nodes.rosutil import camera_of_namespace, run_node
+from mvpose_nodes.rosutil import ReportOnce, camera_of_namespace, run_node
 
 STREAM_DEPTH = 5
 LABELLINGS_KEPT = 50   # initial_markers messages kept while waiting for the image of the same stamp
@@ -25,7 +25,7 @@ WAITING_IMAGES_KEPT = 3   # images kept while waiting for the labelling of the s
 TRACKERS = {'regions': MarkerTracker, 'nearest': NearestNeighbourTracker}
 
 
-class MarkerTrackerNode(Node):
+class MarkerTrackerNode(ReportOnce, Node):
     def __init__(self):
         super().__init__('marker_tracker')
         self.camera = camera_of_namespace(self.get_namespace(), 'marker_tracker')
@@ -39,18 +39,12 @@ class MarkerTrackerNode(Node):
         self.initialised = False
         self.labellings = {}   # stamp [ns] -> initial_markers message
         self.waiting_images = {}   # stamp [ns] -> (rgb, header) of images seen before their labelling
-        self.reported = set()
         self.publisher = self.create_publisher(MarkerTracks, 'marker_tracks', STREAM_DEPTH)
         self.create_subscription(CompressedImage, 'image_raw/compressed', self.on_compressed_image, STREAM_DEPTH)
         self.create_subscription(Image, 'image_raw', self.on_raw_image, STREAM_DEPTH)
         self.create_subscription(MarkerTracks, 'initial_markers', self.on_labelling, LABELLINGS_KEPT)
         self.get_logger().info(f'camera {self.camera}: {method} marker tracking; waiting for the labelled '
                                f'calibration frame on {self.resolve_topic_name("initial_markers")}')
-
-    def report_once(self, cause, text):
-        if cause not in self.reported:
-            self.reported.add(cause)
-            self.get_logger().warning(text)
 
     def on_labelling(self, message):
         """Keep the labelling until its image is there (the two topics race); initialise when it is."""

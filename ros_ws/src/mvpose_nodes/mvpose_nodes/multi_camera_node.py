@@ -12,11 +12,11 @@ from sensor_msgs.msg import CameraInfo
 
 from mvpose_nodes.errors import UserError
 from mvpose_nodes.rosconv import camera_from_messages, stamp_ns
-from mvpose_nodes.rosutil import LATCHED
+from mvpose_nodes.rosutil import LATCHED, ReportOnce
 from mvpose_nodes.sync import ApproximateTimeSynchronizer
 
 
-class MultiCameraNode(Node):
+class MultiCameraNode(ReportOnce, Node):
     """A node fed by synchronised per-camera topics. inputs: {relative topic name: message class},
     subscribed as /cam<K>/<name> for each configured camera; on_frame_set(frame_set) gets each
     synchronised set (sync.FrameSet: messages keyed by (camera, name), missing_groups)."""
@@ -46,17 +46,11 @@ class MultiCameraNode(Node):
             timeout_ns=int(self.get_parameter('camera_timeout').value * 1e9))
         self.calibration = {k: {} for k in cameras}
         self.cameras_known = {}   # camera number -> Camera, from its latest calibration messages
-        self.reported = set()
         for k in cameras:
             for topic, kind in inputs.items():
                 self.create_subscription(kind, f'/cam{k}/{topic}', self.receiver(k, topic), 10)
             self.create_subscription(CameraInfo, f'/cam{k}/camera_info', self.calibration_receiver(k, 'info'), LATCHED)
             self.create_subscription(PoseStamped, f'/cam{k}/camera_pose', self.calibration_receiver(k, 'pose'), LATCHED)
-
-    def report_once(self, cause, text):
-        if cause not in self.reported:
-            self.reported.add(cause)
-            self.get_logger().warning(text)
 
     def calibration_receiver(self, camera, kind):
         """Keep the camera's messages; once both are there, its Camera (converted once, not per frame)."""

@@ -18,6 +18,17 @@ from mvpose_nodes.errors import UserError
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 
+class ReportOnce:
+    """Mixin for a Node: report_once(cause, text) logs a warning the first time each cause occurs, so a
+    stream of bad messages logs once and the node keeps going."""
+
+    def report_once(self, cause, text):
+        reported = self.__dict__.setdefault('_reported_causes', set())
+        if cause not in reported:
+            reported.add(cause)
+            self.get_logger().warning(text)
+
+
 def camera_of_namespace(namespace, executable):
     """The camera number K of a per-camera node's namespace /cam<K>; UserError naming the executable."""
     match = re.match(r'^/cam(\d+)$', namespace)
