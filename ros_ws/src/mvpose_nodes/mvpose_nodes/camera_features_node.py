@@ -16,8 +16,7 @@ from sensor_msgs.msg import CameraInfo, CompressedImage, Image
 from mvpose_nodes.camera_features_config import PARAMETERS, check, settings_from
 from mvpose_nodes.errors import UserError
 from mvpose_nodes.features import FeatureExtractor, draw_features
-from mvpose_nodes.rosconv import (empty_feature_messages, feature_messages, image_from_compressed, image_from_raw,
-                                  rgb_image)
+from mvpose_nodes.rosconv import ImageError, colour_image, empty_feature_messages, feature_messages, rgb_image
 from mvpose_nodes.rosutil import LATCHED, ReportOnce, camera_of_namespace, run_node
 from mvpose_nodes.silhouette import BackgroundModel
 from mvpose_nodes.skin import SkinModel
@@ -57,8 +56,9 @@ class CameraFeaturesNode(ReportOnce, Node):
         self.ellipses_publisher = self.create_publisher(SkinEllipseArray, 'skin_ellipses', STREAM_DEPTH)
         self.contour_publisher = self.create_publisher(LabelledContour, 'labelled_contour', STREAM_DEPTH)
         self.overlay_publisher = self.create_publisher(Image, 'features_overlay', STREAM_DEPTH)
-        self.create_subscription(CompressedImage, 'image_raw/compressed', self.on_compressed_image, STREAM_DEPTH)
-        self.create_subscription(Image, 'image_raw', self.on_raw_image, STREAM_DEPTH)
+        for kind, topic in ((CompressedImage, 'image_raw/compressed'), (Image, 'image_raw')):
+            resolved = self.resolve_topic_name(topic)
+            self.create_subscription(kind, topic, lambda message, t=resolved: self.on_image(message, t), STREAM_DEPTH)
         self.create_subscription(CameraInfo, 'camera_info', self.on_camera_info, LATCHED)
         self.get_logger().info(f'camera {self.camera}: {self.values["silhouette_method"]} silhouettes, '
                                f'skin model {self.values["skin_model"] or default_model_path()}')
@@ -91,23 +91,11 @@ class CameraFeaturesNode(ReportOnce, Node):
             return
         self.camera_info = message
 
-    def on_compressed_image(self, message):
-        topic = self.resolve_topic_name('image_raw/compressed')
+    def on_image(self, message, topic):
         try:
-            rgb = image_from_compressed(message)
-        except ValueError as error:
-            return self.reject(message.header, 0, 0, f'undecodable: {topic}', f'{topic}: {error}')
-        if rgb.ndim != 3:
-            return self.reject(message.header, *rgb.shape[::-1], f'mono: {topic}',
-                               f'{topic}: format {message.format!r} is not a colour image')
-        self.process(rgb, message.header, topic)
-
-    def on_raw_image(self, message):
-        topic = self.resolve_topic_name('image_raw')
-        try:
-            rgb = image_from_raw(message)
-        except ValueError as error:
-            return self.reject(message.header, message.width, message.height, f'encoding: {topic}', f'{topic}: {error}')
+            rgb = colour_image(message)
+        except ImageError as error:
+            return self.reject(message.header, *error.size, f'{error.kind}: {topic}', f'{topic}: {error}')
         self.process(rgb, message.header, topic)
 
     def reject(self, header, width, height, cause, reason):

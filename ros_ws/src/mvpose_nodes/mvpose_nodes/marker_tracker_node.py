@@ -16,7 +16,7 @@ from sensor_msgs.msg import CompressedImage, Image
 
 from mvpose_nodes.errors import UserError
 from mvpose_nodes.markers import FLAG_LOST, MarkerTracker, NearestNeighbourTracker
-from mvpose_nodes.rosconv import image_from_compressed, image_from_raw, marker_tracks, stamp_ns, tracks_from_message
+from mvpose_nodes.rosconv import ImageError, colour_image, marker_tracks, stamp_ns, tracks_from_message
 from mvpose_nodes.rosutil import ReportOnce, camera_of_namespace, run_node
 
 STREAM_DEPTH = 5
@@ -40,8 +40,9 @@ class MarkerTrackerNode(ReportOnce, Node):
         self.labellings = {}   # stamp [ns] -> initial_markers message
         self.waiting_images = {}   # stamp [ns] -> (rgb, header) of images seen before their labelling
         self.publisher = self.create_publisher(MarkerTracks, 'marker_tracks', STREAM_DEPTH)
-        self.create_subscription(CompressedImage, 'image_raw/compressed', self.on_compressed_image, STREAM_DEPTH)
-        self.create_subscription(Image, 'image_raw', self.on_raw_image, STREAM_DEPTH)
+        for kind, topic in ((CompressedImage, 'image_raw/compressed'), (Image, 'image_raw')):
+            resolved = self.resolve_topic_name(topic)
+            self.create_subscription(kind, topic, lambda message, t=resolved: self.on_image(message, t), STREAM_DEPTH)
         self.create_subscription(MarkerTracks, 'initial_markers', self.on_labelling, LABELLINGS_KEPT)
         self.get_logger().info(f'camera {self.camera}: {method} marker tracking; waiting for the labelled '
                                f'calibration frame on {self.resolve_topic_name("initial_markers")}')
@@ -61,23 +62,11 @@ class MarkerTrackerNode(ReportOnce, Node):
                 if stamp_ns(header) >= stamp:
                     self.process(rgb, header)
 
-    def on_compressed_image(self, message):
-        topic = self.resolve_topic_name('image_raw/compressed')
+    def on_image(self, message, topic):
         try:
-            rgb = image_from_compressed(message)
-        except ValueError as error:
-            return self.reply(message.header, MarkerTracks.STATUS_BAD_INPUT, f'undecodable: {topic}', f'{topic}: {error}')
-        if rgb.ndim != 3:
-            return self.reply(message.header, MarkerTracks.STATUS_BAD_INPUT, f'mono: {topic}',
-                              f'{topic}: format {message.format!r} is not a colour image')
-        self.process(rgb, message.header)
-
-    def on_raw_image(self, message):
-        topic = self.resolve_topic_name('image_raw')
-        try:
-            rgb = image_from_raw(message)
-        except ValueError as error:
-            return self.reply(message.header, MarkerTracks.STATUS_BAD_INPUT, f'encoding: {topic}', f'{topic}: {error}')
+            rgb = colour_image(message)
+        except ImageError as error:
+            return self.reply(message.header, MarkerTracks.STATUS_BAD_INPUT, f'{error.kind}: {topic}', f'{topic}: {error}')
         self.process(rgb, message.header)
 
     def reply(self, header, status, cause, reason):

@@ -111,6 +111,31 @@ def image_from_raw(message):
     return image[..., ::-1].copy() if message.encoding == 'bgr8' else image.copy()
 
 
+class ImageError(ValueError):
+    """An image message that gives no colour image: `kind` ('undecodable', 'mono' or 'encoding') and
+    `size` (width, height) [px] as far as known ((0, 0) when nothing decoded)."""
+
+    def __init__(self, text, kind, size=(0, 0)):
+        super().__init__(text)
+        self.kind, self.size = kind, tuple(size)
+
+
+def colour_image(message):
+    """RGB uint8 (H, W, 3) of a CompressedImage or an rgb8/bgr8 Image; ImageError otherwise."""
+    if isinstance(message, CompressedImage):
+        try:
+            rgb = image_from_compressed(message)
+        except ValueError as error:
+            raise ImageError(str(error), 'undecodable') from None
+        if rgb.ndim != 3:
+            raise ImageError(f'format {message.format!r} is not a colour image', 'mono', rgb.shape[::-1])
+        return rgb
+    try:
+        return image_from_raw(message)
+    except ValueError as error:
+        raise ImageError(str(error), 'encoding', (message.width, message.height)) from None
+
+
 def mono_image(mask, header):
     """sensor_msgs/Image mono8 of a (H, W) uint8 array with the given header."""
     return Image(header=header, height=mask.shape[0], width=mask.shape[1], encoding='mono8', is_bigendian=0,
