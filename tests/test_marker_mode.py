@@ -83,7 +83,7 @@ def test_marker_mode_in_the_graph(tmp_path, background, ros_context):
     """Over DDS: three marker_tracker processes and marker_skeleton (config/markers.launch.yaml) on a small
     marker bag: every frame comes out as a skeleton, and the markers detected in two or more cameras are
     triangulated at their true centres (median within 2 cm; the others are named in status_message as
-    kept from before)."""
+    predicted), and each tracker gets its camera's fused tracks back."""
     import yaml
     from conftest import run_mvpose
     from test_fitting import wait_for_graph
@@ -94,7 +94,8 @@ def test_marker_mode_in_the_graph(tmp_path, background, ros_context):
     launch_file = 'ros_ws/src/mvpose_nodes/config/markers.launch.yaml'
     graph = background('launch', launch_file)
     echo = background('topic', 'echo', '/mvpose/skeleton', '--count', 5, '--timeout', 120)
-    wait_for_graph([f'/cam{k}/marker_tracks' for k in (3, 5, 7)] + ['/mvpose/skeleton'])
+    echo_fused = background('topic', 'echo', '/cam5/marker_tracks_fused', '--count', 5, '--timeout', 120)
+    wait_for_graph([f'/cam{k}/marker_tracks' for k in (3, 5, 7)] + ['/mvpose/skeleton', '/cam5/marker_tracks_fused'])
     played = [f'/cam{k}/{kind}' for k in (3, 5, 7)
               for kind in ('image_raw/compressed', 'camera_info', 'camera_pose', 'ground_truth/markers')]
     run_mvpose('bag', 'play', bag, '--topics', *played, '--wait-for-subscribers', '--delay', 1.0, '--rate', 0.2,
@@ -107,13 +108,45 @@ def test_marker_mode_in_the_graph(tmp_path, background, ros_context):
     for skeleton in skeletons:
         stamp = skeleton['header']['stamp']['sec'] * 10**9 + skeleton['header']['stamp']['nanosec']
         joints = np.array([[j['position'][a] for a in 'xyz'] for j in skeleton['joints']])
-        # The markers this frame triangulated (detected in 2+ cameras; the rest are named as kept).
+        # The markers this frame triangulated (detected in 2+ cameras; the rest are named as predicted).
         reason = skeleton['status_message']
-        kept = reason.split(': ', 1)[1].split(';')[0].split(', ') if reason.startswith('kept') else []
-        fresh = [i for i, name in enumerate(JOINT_NAMES) if name not in kept]
+        predicted = reason.split(': ', 1)[1].split(';')[0].split(', ') if reason.startswith('predicted') else []
+        fresh = [i for i, name in enumerate(JOINT_NAMES) if name not in predicted]
         assert len(fresh) >= 3, reason   # with 3 cameras round the person many markers are seen by one only
         errors = np.linalg.norm(joints[fresh] - truth[stamp][fresh], axis=1)
         # The median: a marker given the wrong blob (an identity error, which `markers eval` counts) is
         # the tracker's accuracy, not this plumbing's.
         assert np.median(errors) < 0.02, (reason, errors.round(3))
+    # Each tracker waited for its fused tracks, so the graph computed what the same code does offline.
+    offline = offline_fusion(bag, (3, 5, 7))
+    for skeleton in skeletons:
+        stamp = skeleton['header']['stamp']['sec'] * 10**9 + skeleton['header']['stamp']['nanosec']
+        joints = np.array([[j['position'][a] for a in 'xyz'] for j in skeleton['joints']])
+        np.testing.assert_allclose(joints, offline[stamp], atol=1e-6)
+    code, out, err = echo_fused.finish(timeout=60)
+    assert code == 0, err
+    fused = [d for d in yaml.safe_load_all(out) if d]
+    assert len(fused) == 5 and all(len(d['x']) == 15 for d in fused)
     graph.interrupt()
+
+
+def offline_fusion(bag, numbers):
+    """{stamp [ns]: (15, 3) [m]} of marker_tracker + marker_skeleton run without ROS on `bag`."""
+    from mvpose_nodes.camera_bag import frame_sets
+    from mvpose_nodes.marker_views import MarkerViews
+    from mvpose_nodes.markers import MarkerTracker
+    trackers, views, result = {k: MarkerTracker() for k in numbers}, None, {}
+    for frame_set in frame_sets(bag, numbers):
+        if views is None:
+            for k in numbers:
+                trackers[k].initialise(frame_set.images[k], *frame_set.markers[k])
+        tracks = [trackers[k].track(frame_set.images[k]) for k in numbers]
+        if views is None:
+            views = MarkerViews([frame_set.cameras[k] for k in numbers])
+            views.start([t[0] for t in tracks], [t[1] for t in tracks])
+        points, positions, flags = views.fuse([t[0] for t in tracks], [t[1] for t in tracks],
+                                              [trackers[k].detections.astype(np.float32) for k in numbers])
+        for c, k in enumerate(numbers):   # (float32: the blobs as MarkerTracks carries them)
+            trackers[k].correct(positions[c], flags[c])
+        result[frame_set.stamp_ns] = points
+    return result

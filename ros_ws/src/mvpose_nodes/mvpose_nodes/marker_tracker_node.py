@@ -5,12 +5,21 @@ Subscribes image_raw/compressed and image_raw (rgb8/bgr8), and initial_markers (
 labelled markers of the calibration frame, as an operator labels them (for synthetic bags, remap it
 to ground_truth/markers: only the message with the stamp of the first image is used). Publishes
 marker_tracks (MarkerTracks, the image's header): each marker's position and whether it was detected
-by colour, predicted (occluded), or lost. Images that come before the calibration frame's labelling
-are held (the last few) until it comes; earlier ones get no answer. Bad images are logged once per cause and answered with
-STATUS_BAD_INPUT; the node keeps running.
+by colour, predicted (occluded), or lost, and all the red blobs of the image. Images that come before
+the calibration frame's labelling are held (the last few) until it comes; earlier ones get no answer.
+Bad images are logged once per cause and answered with STATUS_BAD_INPUT; the node keeps running.
+
+When marker_skeleton runs (it publishes marker_tracks_fused in this namespace: the tracks of all
+cameras fused in 3D and projected back here), each image waits until the fused tracks of the previous
+one have come, at most `fused_wait` seconds, and the tracker continues from them (markers.correct):
+identities that the other views contradict are mended, and a hidden marker starts from where the other
+views see it.
 """
+import collections
+import time
+
 from mvpose_msgs.msg import MarkerTracks
-from rcl_interfaces.msg import ParameterDescriptor
+from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor
 from rclpy.node import Node
 from sensor_msgs.msg import CompressedImage, Image
 
@@ -22,6 +31,7 @@ from mvpose_nodes.rosutil import ReportOnce, camera_of_namespace, run_node
 STREAM_DEPTH = 5
 LABELLINGS_KEPT = 50   # initial_markers messages kept while waiting for the image of the same stamp
 WAITING_IMAGES_KEPT = 3   # images kept while waiting for the labelling of the same stamp
+QUEUED_IMAGES_KEPT = 100  # images kept while waiting for the fused tracks of the previous one
 TRACKERS = {'regions': MarkerTracker, 'nearest': NearestNeighbourTracker}
 
 
@@ -35,7 +45,14 @@ class MarkerTrackerNode(ReportOnce, Node):
         method = self.get_parameter('method').value
         if method not in TRACKERS:
             raise UserError(f"parameter 'method' must be one of {', '.join(TRACKERS)}, got {method!r}")
+        self.declare_parameter('fused_wait', 1.0, ParameterDescriptor(
+            description='[s] longest wait of an image for the fused tracks of the previous one on marker_tracks_fused '
+                        '(only while marker_skeleton publishes them); 0: never wait',
+            floating_point_range=[FloatingPointRange(from_value=0.0, to_value=60.0, step=0.0)]))
+        self.fused_wait = self.get_parameter('fused_wait').value
         self.tracker = TRACKERS[method]()
+        self.queue = collections.deque()   # (rgb, header) of images tracked in turn
+        self.awaited = None                # (stamp [ns] of the last tracks published, when) until their fusion comes
         self.initialised = False
         self.labellings = {}   # stamp [ns] -> initial_markers message
         self.waiting_images = {}   # stamp [ns] -> (rgb, header) of images seen before their labelling
@@ -44,6 +61,9 @@ class MarkerTrackerNode(ReportOnce, Node):
             resolved = self.resolve_topic_name(topic)
             self.create_subscription(kind, topic, lambda message, t=resolved: self.on_image(message, t), STREAM_DEPTH)
         self.create_subscription(MarkerTracks, 'initial_markers', self.on_labelling, LABELLINGS_KEPT)
+        self.fused_topic = self.resolve_topic_name('marker_tracks_fused')
+        self.create_subscription(MarkerTracks, 'marker_tracks_fused', self.on_fused, STREAM_DEPTH)
+        self.create_timer(0.01, self.track_queued)
         self.get_logger().info(f'camera {self.camera}: {method} marker tracking; waiting for the labelled '
                                f'calibration frame on {self.resolve_topic_name("initial_markers")}')
 
@@ -95,8 +115,37 @@ class MarkerTrackerNode(ReportOnce, Node):
             self.tracker.initialise(rgb, positions, labelled_flags == MarkerTracks.FLAG_DETECTED)
             self.initialised, self.labellings, self.waiting_images = True, {}, {}
             self.get_logger().info(f'camera {self.camera}: initialised from the labelled frame at {stamp_ns(header)} ns')
-        positions, flags = self.tracker.track(rgb)
-        self.publisher.publish(marker_tracks(header, positions, flags))
+        self.queue.append((rgb, header))
+        if len(self.queue) > QUEUED_IMAGES_KEPT:
+            self.queue.popleft()
+            self.report_once('queue', f'more than {QUEUED_IMAGES_KEPT} images waiting for {self.fused_topic}: '
+                                      'the oldest are dropped (is fused_wait too long for this image rate?)')
+        self.track_queued()
+
+    def track_queued(self):
+        """Track the queued images in turn, each once the previous one's fused tracks are in (or fused_wait
+        has passed, or nothing publishes them)."""
+        while self.queue:
+            if self.awaited is not None and time.monotonic() - self.awaited[1] < self.fused_wait \
+                    and self.count_publishers(self.fused_topic) > 0:
+                return
+            rgb, header = self.queue.popleft()
+            positions, flags = self.tracker.track(rgb)
+            self.publisher.publish(marker_tracks(header, positions, flags, blobs=self.tracker.detections))
+            self.awaited = (stamp_ns(header), time.monotonic())
+
+    def on_fused(self, message):
+        """The fused tracks of the last image: the tracker continues from them."""
+        if self.awaited is None or stamp_ns(message.header) != self.awaited[0]:
+            return   # late (fused_wait passed) or not ours to wait for
+        try:
+            positions, flags = tracks_from_message(message)
+        except ValueError as error:
+            self.report_once('bad fused', f'{self.fused_topic}: {error}; dropped')
+        else:
+            self.tracker.correct(positions, flags)
+        self.awaited = None
+        self.track_queued()
 
 
 def main(args=None):

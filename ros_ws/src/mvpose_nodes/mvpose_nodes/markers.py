@@ -368,6 +368,16 @@ class _TrackerBase:
         self.detections = detections
         return positions.copy(), flags.copy()
 
+    def correct(self, positions, flags):
+        """Replace the last frame's estimate with a better one (marker_views: the cameras' tracks fused in
+        3D), so that the next frame is predicted from it: positions (15, 2) [px], flags (15,) FLAG_*. A
+        lost marker (FLAG_LOST) keeps this tracker's own position."""
+        flags = np.asarray(flags, np.uint8)
+        known = flags != FLAG_LOST
+        self.positions[known] = np.asarray(positions, np.float64)[known]
+        self.flags = flags.copy()
+        self.predicted_run = np.where(flags == FLAG_DETECTED, 0, np.maximum(self.predicted_run, 1))
+
     @property
     def limb_gate(self):
         return self.settings.limb_gate_fraction * self.torso_length
@@ -438,6 +448,14 @@ class MarkerTracker(_TrackerBase):
             self.references[region] = points.copy()
             self.regions[region] = self._region_record(region, np.zeros(2), 1.0)
         return positions, flags
+
+    def correct(self, positions, flags):
+        """As _TrackerBase.correct; each region's window is centred again on its corrected markers' box."""
+        super().correct(positions, flags)
+        for region, indices in REGION_INDICES.items():
+            points = self.positions[list(indices)]
+            self.trackers[region].centre = (points.min(axis=0) + points.max(axis=0)) / 2.0
+            self.regions[region] = self._region_record(region, self.regions[region]['S'], self.regions[region]['ncc'])
 
     def _region_record(self, region, displacement, score):
         tracker = self.trackers[region]

@@ -35,33 +35,50 @@ def markers_main(argv=None, prog='markers'):
 def evaluate_bag(bag, cameras=None):
     from mvpose_nodes.body_model import JOINT_NAMES
     from mvpose_nodes.camera_bag import frame_sets
+    from mvpose_nodes.marker_views import MarkerViews
     from mvpose_nodes.markers import MarkerTracker, NearestNeighbourTracker
     from mvpose_nodes.progress import Progress
 
-    methods = {'regions (paper 001)': MarkerTracker, 'nearest neighbour': NearestNeighbourTracker}
-    trackers, results, truth_3d, camera_of = {}, {m: {} for m in methods}, [], {}
-    sets = list(frame_sets(bag, cameras))
-    if not sets or not any(getattr(s, 'markers', None) for s in sets):
+    sets = [s for s in frame_sets(bag, cameras) if getattr(s, 'markers', None)]
+    if not sets:
         raise UserError(f"bag '{bag}' has no ground-truth markers (/cam<K>/ground_truth/markers): "
                         "make one with ./mvpose synth --markers")
+    numbers = sorted(sets[0].markers)
+    sets = [s for s in sets if all(k in s.markers and k in s.images for k in numbers)]
+    camera_of = {k: sets[0].cameras[k] for k in numbers}
+    methods = {'nearest neighbour': NearestNeighbourTracker, 'regions (paper 001)': MarkerTracker,
+               'regions + 3 views': MarkerTracker}
+    trackers = {method: {k: make() for k in numbers} for method, make in methods.items()}
+    views = MarkerViews([camera_of[k] for k in numbers])
+    results = {method: {k: [] for k in numbers} for method in methods}
+    fused_3d, truth_3d = [], []
     progress = Progress(len(sets), 'markers eval')
-    for frame_set in sets:
+    for index, frame_set in enumerate(sets):
         truth_3d.append(frame_set.marker_centres if frame_set.marker_centres is not None else frame_set.truth)
-        for number, image in sorted(frame_set.images.items()):
-            if number not in frame_set.markers:
-                continue
-            true_positions, visible = frame_set.markers[number]
-            camera_of[number] = frame_set.cameras[number]
-            for method, make in methods.items():
-                tracker = trackers.get((method, number))
-                if tracker is None:
-                    tracker = trackers[(method, number)] = make()
-                    tracker.initialise(image, true_positions, visible)
-                positions, flags = tracker.track(image)
-                results[method].setdefault(number, []).append((positions, flags, true_positions, visible))
+        truth = {k: frame_set.markers[k] for k in numbers}
+        tracks = {}
+        for method in methods:
+            for k in numbers:
+                tracker = trackers[method][k]
+                image = frame_set.images[k]
+                if index == 0:
+                    tracker.initialise(image, *truth[k])
+                tracks[method, k] = tracker.track(image)
+        # As marker_skeleton does: started from the first frame's tracks, then every frame fused.
+        own = [tracks['regions + 3 views', k] for k in numbers]
+        if index == 0:
+            views.start([t[0] for t in own], [t[1] for t in own])
+        points, positions, flags = views.fuse([t[0] for t in own], [t[1] for t in own],
+                                              [trackers['regions + 3 views'][k].detections for k in numbers])
+        fused_3d.append(points)
+        for c, k in enumerate(numbers):
+            trackers['regions + 3 views'][k].correct(positions[c], flags[c])
+            tracks['regions + 3 views', k] = (positions[c], flags[c])
+        for (method, k), (estimate, estimate_flags) in tracks.items():
+            results[method][k].append((estimate, estimate_flags, *truth[k]))
         progress.update()
     progress.close()
-    report(bag, results, camera_of, truth_3d, JOINT_NAMES)
+    report(bag, results, camera_of, truth_3d, JOINT_NAMES, {'regions + 3 views': fused_3d})
 
 
 def errors_and_swaps(runs):
@@ -85,14 +102,13 @@ def swap_events(swapped):
     return int(begins.sum())
 
 
-def report(bag, results, camera_of, truth_3d, names):
-    from mvpose_nodes.marker_triangulation import triangulate_markers
+def report(bag, results, camera_of, truth_3d, names, fused_3d):
     methods = list(results)
     summary = {}
     print(f'markers eval: {bag}  (cameras {" ".join(map(str, sorted(camera_of)))}, {len(truth_3d)} frames)   '
           f'2D errors [px] against the true marker centres; "hidden" = the prediction while the marker is occluded')
-    print(f'  {"":<16}' + ''.join(f'{m:<42}' for m in methods))
-    print(f'  {"marker":<16}' + f'{"visible mean  max  hidden mean  max  swaps":<42}' * len(methods))
+    print(f'  {"":<16}' + ''.join(f'{m:<45}' for m in methods))
+    print(f'  {"marker":<16}' + f'{"visible mean  max  hidden mean  max  swaps":<45}' * len(methods))
     per_method = {}
     for method in methods:
         per_camera = [errors_and_swaps(runs) for runs in results[method].values()]
@@ -108,23 +124,16 @@ def report(bag, results, camera_of, truth_3d, names):
         for method in methods:
             errors, visible, swaps = per_method[method]
             row += (f'{cells(errors[visible[:, m], m]):>12}  {cells(errors[~visible[:, m], m]):>11}  '
-                    f'{swaps[m]:>4}').ljust(42)
+                    f'{swaps[m]:>4}').ljust(45)
         print(row)
     print(f'  {"all":<16}' + ''.join(
-        (f'{cells(e[v]):>12}  {cells(e[~v]):>11}  {s.sum():>4}').ljust(42) for e, v, s in per_method.values()))
+        (f'{cells(e[v]):>12}  {cells(e[~v]):>11}  {s.sum():>4}').ljust(45) for e, v, s in per_method.values()))
     for method in methods:
         errors, visible, swaps = per_method[method]
-        cameras = sorted(results[method])
-        frames = min(len(results[method][k]) for k in cameras)
-        joints = []
-        previous = None
-        for f in range(frames):
-            runs = [results[method][k][f] for k in cameras]
-            estimate, _ = triangulate_markers([camera_of[k] for k in cameras], [r[0] for r in runs],
-                                              [r[1] for r in runs], previous)
-            previous = estimate if np.all(np.isfinite(estimate)) else previous
-            joints.append(estimate)
-        truth = np.array(truth_3d[:frames], dtype=float)
+        joints = fused_3d.get(method)
+        if joints is None:
+            joints = triangulated(results[method], camera_of)
+        truth = np.array(truth_3d[:len(joints)], dtype=float)
         error_3d = 1000 * np.linalg.norm(np.array(joints) - truth, axis=2)
         summary[method] = (errors[visible].mean() if visible.any() else np.nan,
                            errors[~visible].mean() if (~visible).any() else np.nan, int(swaps.sum()),
@@ -134,3 +143,17 @@ def report(bag, results, camera_of, truth_3d, names):
         print(f'  {method:<22} {v:>12.2f} {h:>17.2f} {s:>15d}   {mean_3d:>10.1f} / {max_3d:.1f}')
     print(f'  targets: {TARGETS["swaps"]} identity swaps, visible mean <= {TARGETS["visible"]} px, '
           f'hidden (predicted) mean <= {TARGETS["predicted"]} px')
+
+
+def triangulated(runs, camera_of):
+    """(F, 15, 3) [m]: each frame's markers triangulated from the cameras' tracks (marker_triangulation),
+    for the trackers that do not fuse their views themselves."""
+    from mvpose_nodes.marker_triangulation import triangulate_markers
+    cameras = sorted(runs)
+    joints, previous = [], None
+    for f in range(min(len(runs[k]) for k in cameras)):
+        estimate, _ = triangulate_markers([camera_of[k] for k in cameras], [runs[k][f][0] for k in cameras],
+                                          [runs[k][f][1] for k in cameras], previous)
+        previous = estimate if np.all(np.isfinite(estimate)) else previous
+        joints.append(estimate)
+    return np.array(joints)

@@ -257,12 +257,15 @@ def skeleton_markers(joints, header, status):
     return MarkerArray(markers=[spheres, lines])
 
 
-def marker_tracks(header, positions, flags, status=MarkerTracks.STATUS_OK, status_message=''):
-    """MarkerTracks of the 15 markers: positions (15, 2) [px] (x, y), flags (15,) FLAG_*; `header` kept."""
+def marker_tracks(header, positions, flags, status=MarkerTracks.STATUS_OK, status_message='', blobs=()):
+    """MarkerTracks of the 15 markers: positions (15, 2) [px] (x, y), flags (15,) FLAG_*, and the image's red
+    blobs (N, 2) [px]; `header` kept."""
     positions = np.asarray(positions, dtype=float).reshape(len(JOINT_NAMES), 2)
+    blobs = np.asarray(blobs, dtype=float).reshape(-1, 2)
     return MarkerTracks(header=header, status=status, status_message=status_message, names=list(JOINT_NAMES),
                         x=positions[:, 0].tolist(), y=positions[:, 1].tolist(),
-                        flags=[int(flag) for flag in np.asarray(flags).reshape(len(JOINT_NAMES))])
+                        flags=[int(flag) for flag in np.asarray(flags).reshape(len(JOINT_NAMES))],
+                        blob_x=blobs[:, 0].tolist(), blob_y=blobs[:, 1].tolist())
 
 
 def tracks_from_message(message):
@@ -281,3 +284,13 @@ def tracks_from_message(message):
     if not np.all(np.isfinite(positions[flags != MarkerTracks.FLAG_LOST])):
         raise ValueError('MarkerTracks has a marker that is not lost but not finite')
     return positions, flags
+
+
+def blobs_from_message(message):
+    """(N, 2) float64 [px]: a MarkerTracks' red blobs; ValueError when blob_x and blob_y disagree or are not finite."""
+    if len(message.blob_x) != len(message.blob_y):
+        raise ValueError('MarkerTracks blob_x and blob_y differ in length')
+    blobs = np.column_stack([np.asarray(message.blob_x, float), np.asarray(message.blob_y, float)])
+    if not np.all(np.isfinite(blobs)):
+        raise ValueError('MarkerTracks has a blob that is not finite')
+    return blobs

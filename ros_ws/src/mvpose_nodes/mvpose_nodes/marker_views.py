@@ -1,0 +1,323 @@
+"""Marker mode across cameras (beyond paper 001, which tracks in one 2D view): the cameras' 2D marker
+tracks of one frame fused into 3D markers, and each camera's tracks corrected from them.
+
+Per frame (`MarkerViews.fuse`):
+
+1. Each marker's 3D point from the cameras whose tracker detected it. Every pair of those views is
+   triangulated (DLT, triangulation.triangulate); a view agrees with a point when its viewing ray passes
+   within `agreement_m` of it (a distance in metres at the marker, the same for near and far cameras).
+   The pair with the most agreeing views wins, ties going to the point nearer the marker's predicted
+   position; the point is then triangulated again from all the views that agree. A view that disagrees
+   has given the marker another marker's blob (an identity swap in that view). A pair farther than
+   `jump_gate_m` from the prediction (more, the longer the marker has gone without two views) is not
+   used: two views that made the same mistake.
+2. A marker without two agreeing views is predicted: a region marker (markers.REGIONS) moves with the
+   mean 3D displacement of its region's triangulated markers (the head with the shoulders'), the 3D form
+   of paper 001's region displacement; a limb marker, or a region marker whose region has none, at
+   constant velocity. One detecting view then pulls the prediction onto its ray (the ray's point
+   nearest to it) when the ray passes within `single_view_gate_m`.
+3. In each camera, the 15 points are projected and the image's red blobs (all of them, assigned by its
+   tracker or not) are paired with the projections by the Hungarian method, each gated at `blob_gate_m`
+   at the marker's depth: a blob's identity is now the one that agrees with the other views. A paired
+   marker is DETECTED at its blob; an unpaired one is PREDICTED at its projection (the prediction the
+   paper makes in 2D, here from the other views of the same instant).
+4. Steps 1 and 3 run twice: the second time from the blobs as re-assigned in step 3.
+
+The result goes back to each camera's tracker (markers._TrackerBase.correct), so the next frame's
+search starts from positions the views agree on. Points in metres (world frame, camera.py), pixels as
+in markers.py. Pure NumPy/OpenCV/SciPy: no ROS.
+"""
+import itertools
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import linear_sum_assignment
+
+from mvpose_nodes.markers import FLAG_DETECTED, FLAG_LOST, FLAG_PREDICTED, MARKER_NAMES, REGION_INDICES, \
+    gated_assignment
+from mvpose_nodes.triangulation import triangulate
+
+# The region whose motion carries each region marker when it cannot be triangulated: its own region,
+# except the head (one marker), which moves with the shoulders.
+CARRIER_REGION = {index: ('shoulders' if region == 'head' else region)
+                  for region, indices in REGION_INDICES.items() for index in indices}
+REGION_MARKERS = tuple(sorted(CARRIER_REGION))
+# Each limb marker's parent along the body (body_model's tree); parents come first.
+LIMB_PARENT = {MARKER_NAMES.index(child): MARKER_NAMES.index(parent) for child, parent in (
+    ('left_elbow', 'left_shoulder'), ('right_elbow', 'right_shoulder'), ('left_knee', 'left_hip'),
+    ('right_knee', 'right_hip'), ('left_wrist', 'left_elbow'), ('right_wrist', 'right_elbow'),
+    ('left_ankle', 'left_knee'), ('right_ankle', 'right_knee'))}
+LIMB_MARKERS = tuple(LIMB_PARENT)
+_BIG = 1e9
+
+
+@dataclass(frozen=True)
+class ViewSettings:
+    agreement_m: float = 0.03        # a view agrees with a 3D point when its ray passes this close [m]
+    jump_gate_m: float = 0.3         # a multi-view point this far from the prediction is refused [m] (plus
+                                     # reacquire_growth_m per frame the marker has gone without two views)
+    single_view_gate_m: float = 0.15  # one view's ray moves the prediction onto it when this close [m]
+    blob_gate_m: float = 0.04        # a blob is paired with a triangulated marker's projection within this,
+                                     # at the marker's depth [m] ...
+    predicted_blob_gate_m: float = 0.09  # ... with a predicted marker's (one or no view) within this [m]
+    bone_tolerance_m: float = 0.05   # a limb marker stays this close to its first distance from its parent [m]
+    reacquire_gate_m: float = 0.5    # a marker takes unclaimed blobs' 3D point at most this far from its estimate [m]
+    reacquire_growth_m: float = 0.03  # ... the gate widening by this per frame without two views [m]
+    velocity_damping: float = 0.5    # a marker's velocity shrinks by this each frame it is not triangulated
+    max_predicted_frames: int = 25   # a marker without any detecting view for longer is FLAG_LOST
+
+
+class MarkerViews:
+    """The 3D markers of C calibrated cameras, frame after frame.
+
+    `points` (15, 3) float64 [m] after each call; `support` (15,) int: the views the point was
+    triangulated from (0 or 1: predicted)."""
+
+    def __init__(self, cameras, settings=ViewSettings()):
+        self.cameras = list(cameras)
+        self.settings = settings
+        self.points = self.velocity = self.lengths = None
+        self.support = np.zeros(len(MARKER_NAMES), int)
+        self.predicted_run = np.zeros(len(MARKER_NAMES), int)
+        self.unsupported_run = np.zeros(len(MARKER_NAMES), int)
+
+    def start(self, positions, flags):
+        """The first frame: positions (C, 15, 2) [px] and flags (C, 15) of the initial labelling; each
+        marker triangulated from every view that places it (FLAG_LOST excepted), hidden ones included.
+        Returns points (15, 3) [m]; NaN rows for markers placed in fewer than 2 views."""
+        positions, flags = np.asarray(positions, float), np.asarray(flags)
+        points = np.full((len(MARKER_NAMES), 3), np.nan)
+        for marker in range(len(MARKER_NAMES)):
+            found = triangulate(self.cameras, positions[:, marker], (flags[:, marker] != FLAG_LOST).astype(float))
+            if found is not None:
+                points[marker] = found[0]
+        self.points, self.velocity = points, np.zeros_like(points)
+        self.lengths = np.full(len(MARKER_NAMES), np.nan)
+        for child, parent in LIMB_PARENT.items():
+            self.lengths[child] = np.linalg.norm(points[child] - points[parent])
+        self.support = (flags == FLAG_DETECTED).sum(axis=0)
+        self.predicted_run[:] = 0
+        self.unsupported_run[:] = 0
+        return points.copy()
+
+    def fuse(self, positions, flags, blobs=None):
+        """One frame. positions (C, 15, 2) [px] and flags (C, 15) FLAG_*: each camera's tracks; blobs: per
+        camera the (N_c, 2) [px] red blobs of its image (None: the tracks' detected positions). Returns
+        (points (15, 3) [m], positions (C, 15, 2) [px], flags (C, 15) uint8): the 3D markers and every
+        camera's tracks corrected by them."""
+        if self.points is None:
+            raise RuntimeError('start() first')
+        positions, flags = np.asarray(positions, float), np.asarray(flags)
+        if blobs is None:
+            blobs = [positions[c][flags[c] == FLAG_DETECTED] for c in range(len(self.cameras))]
+        predicted = self.points + self.velocity
+        observed, detected = positions, flags == FLAG_DETECTED
+        for again in (True, False):
+            points, support = self._points(observed, detected, predicted)
+            observed, detected, unclaimed = self._assign_blobs(points, support, blobs)
+            if again:
+                self._reacquire(points, support, observed, detected, unclaimed)
+        self.predicted_run = np.where(support > 0, 0, self.predicted_run + 1)
+        self.unsupported_run = np.where(support >= 2, 0, self.unsupported_run + 1)
+        corrected = np.where(detected, FLAG_DETECTED, FLAG_PREDICTED).astype(np.uint8)
+        corrected[:, (self.predicted_run > self.settings.max_predicted_frames) | ~np.all(np.isfinite(points), axis=1)] = FLAG_LOST
+        damping = np.where(support >= 2, 1.0, self.settings.velocity_damping)[:, None]
+        self.velocity = damping * (points - self.points)
+        self.points, self.support = points, support
+        return points.copy(), observed, corrected
+
+    def _points(self, positions, detected, predicted):
+        """Steps 1 and 2: (points (15, 3), support (15,) int) from the detected positions (C, 15, 2)."""
+        count = len(MARKER_NAMES)
+        points = np.full((count, 3), np.nan)
+        support = np.zeros(count, int)
+        rays = [self._rays(c, positions[c]) for c in range(len(self.cameras))]
+        for marker in REGION_MARKERS:
+            points[marker], support[marker] = self._triangulated_best(marker, positions, detected, rays, predicted)
+        for marker in REGION_MARKERS:
+            if not support[marker]:
+                base = self._region_prediction(marker, points, support, predicted)
+                points[marker], support[marker] = self._on_a_ray(marker, base, detected, rays)
+        for marker in LIMB_MARKERS:   # parents first
+            parent = LIMB_PARENT[marker]
+            points[marker], support[marker] = self._triangulated_best(marker, positions, detected, rays, predicted,
+                                                                      points[parent])
+            if not support[marker]:
+                # Hidden: carried by its parent marker (as the 2D tracker carries a hidden limb with its
+                # region; a velocity runs away over a long occlusion), kept at its distance from it.
+                base = self._on_shell(marker, self.points[marker] + points[parent] - self.points[parent],
+                                      points[parent])
+                points[marker], support[marker] = self._on_a_ray(marker, base, detected, rays, points[parent])
+        return points, support
+
+    def _triangulated_best(self, marker, positions, detected, rays, predicted, parent=None):
+        """Step 1 for one marker: (point (3,), agreeing views) or (NaN, 0). A limb marker's point must lie
+        within its distance from its parent's `parent` point (± 2 × bone_tolerance_m)."""
+        s = self.settings
+        views = np.flatnonzero(detected[:, marker])
+        best = None
+        for pair in itertools.combinations(views, 2):
+            found = self._triangulated(positions[:, marker], pair)
+            if found is None or not self._near_shell(marker, found, parent, 2.0 * s.bone_tolerance_m):
+                continue
+            gap = np.linalg.norm(found - predicted[marker]) if np.all(np.isfinite(predicted[marker])) else 0.0
+            agree = [c for c in views if _ray_distance(rays[c][0], rays[c][1][marker], found) <= s.agreement_m]
+            if gap > s.jump_gate_m + s.reacquire_growth_m * self.unsupported_run[marker] or len(agree) < 2:
+                continue
+            key = (len(agree), -gap)
+            if best is None or key > best[0]:
+                best = (key, agree)
+        if best is None:
+            return np.full(3, np.nan), 0
+        return self._triangulated(positions[:, marker], best[1]), len(best[1])
+
+    def _region_prediction(self, marker, points, support, predicted):
+        """A region marker without two agreeing views: moved with its region's triangulated markers, or at
+        constant velocity."""
+        moved = [i for i in REGION_INDICES[CARRIER_REGION[marker]] if support[i] >= 2]
+        if moved:
+            return self.points[marker] + np.mean(points[moved] - self.points[moved], axis=0)
+        return predicted[marker]
+
+    def _on_a_ray(self, marker, base, detected, rays, parent=None):
+        """(point, 1) on the detecting view's ray nearest to `base` (for a limb marker: within its
+        distance of `parent`) when within single_view_gate_m of it; else (base, 0)."""
+        best = None
+        for c in np.flatnonzero(detected[:, marker]):
+            origin, direction = rays[c][0], rays[c][1][marker]
+            point = self._ray_point(marker, origin, direction, base, parent)
+            gap = np.linalg.norm(point - base)
+            if gap <= self.settings.single_view_gate_m and (best is None or gap < best[0]):
+                best = (gap, point)
+        return (base, 0) if best is None else (best[1], 1)
+
+    def _ray_point(self, marker, origin, direction, base, parent):
+        """The point of the ray nearest to `base`; for a limb marker, of the ray's points at its distance
+        (± bone_tolerance_m) from `parent`, the nearest to `base` (the ray's point nearest to `parent`
+        when the ray passes wide of that shell)."""
+        along = float(np.dot(base - origin, direction))
+        point = origin + direction * along
+        if parent is None or self._near_shell(marker, point, parent, self.settings.bone_tolerance_m):
+            return point
+        length = self.lengths[marker]
+        tolerance = self.settings.bone_tolerance_m
+        radius = length - tolerance if np.linalg.norm(point - parent) < length else length + tolerance
+        middle = float(np.dot(parent - origin, direction))
+        closest = np.linalg.norm(origin + direction * middle - parent)
+        if closest > radius:
+            return origin + direction * middle
+        half = np.sqrt(radius ** 2 - closest ** 2)
+        roots = np.array([middle - half, middle + half])
+        return origin + direction * roots[np.argmin(np.abs(roots - along))]
+
+    def _near_shell(self, marker, point, parent, tolerance):
+        if parent is None or not np.isfinite(self.lengths[marker]):
+            return True
+        return abs(np.linalg.norm(point - parent) - self.lengths[marker]) <= tolerance
+
+    def _on_shell(self, marker, point, parent):
+        """`point` moved along the line from `parent` to within its distance (± bone_tolerance_m) from it."""
+        if not np.isfinite(self.lengths[marker]):
+            return point
+        offset = point - parent
+        distance = np.linalg.norm(offset)
+        tolerance = self.settings.bone_tolerance_m
+        wanted = np.clip(distance, self.lengths[marker] - tolerance, self.lengths[marker] + tolerance)
+        return parent + offset * (wanted / max(distance, 1e-9))
+
+    def _assign_blobs(self, points, support, blobs):
+        """Step 3: per camera, the blobs paired with the projected points. Returns (positions (C, 15, 2):
+        the paired blob or the projection, detected (C, 15) bool, unclaimed: per camera the indices of the
+        blobs paired with no marker)."""
+        count = len(self.cameras)
+        positions = np.zeros((count, len(points), 2))
+        detected = np.zeros((count, len(points)), bool)
+        unclaimed = []
+        for c, camera in enumerate(self.cameras):
+            projected, depth = camera.project(points)
+            positions[c] = projected
+            gate = np.where(support >= 2, self.settings.blob_gate_m, self.settings.predicted_blob_gate_m) \
+                * camera.K[0, 0] / np.maximum(depth, 1e-6)
+            camera_blobs = np.asarray(blobs[c], float).reshape(-1, 2)
+            match = gated_assignment(projected, camera_blobs, gate)
+            positions[c][match >= 0] = camera_blobs[match[match >= 0]]
+            detected[c] = match >= 0
+            unclaimed.append(camera_blobs[np.setdiff1d(np.arange(len(camera_blobs)), match[match >= 0])])
+        return positions, detected, unclaimed
+
+    def _reacquire(self, points, support, observed, detected, unclaimed):
+        """Step 3b: markers without two agreeing views take the 3D points that blobs no marker claimed
+        make in two or more views (a marker whose prediction drifted while it was hidden finds its blobs
+        again when it reappears). A candidate goes to the marker nearest to it (a limb marker: at its
+        distance from its parent) by the Hungarian method, within a gate that widens with the frames the
+        marker has gone without two views, blob_gate_m + reacquire_growth_m per frame, up to
+        reacquire_gate_m; its blobs become that
+        marker's detections in observed (C, 15, 2) and detected (C, 15), changed in place."""
+        s = self.settings
+        markers = np.flatnonzero(support < 2)
+        candidates = self._unclaimed_points(unclaimed)
+        if not len(markers) or not candidates:
+            return
+        cost = np.full((len(markers), len(candidates)), _BIG)
+        for row, marker in enumerate(markers):
+            parent = points[LIMB_PARENT[marker]] if marker in LIMB_PARENT else None
+            gate = min(s.reacquire_gate_m, s.blob_gate_m + s.reacquire_growth_m * self.unsupported_run[marker])
+            for column, (point, _) in enumerate(candidates):
+                gap = np.linalg.norm(point - points[marker])
+                if gap <= gate and self._near_shell(marker, point, parent, 2.0 * s.bone_tolerance_m):
+                    cost[row, column] = gap
+        used = set()
+        for row, column in sorted(zip(*linear_sum_assignment(cost)), key=lambda pair: cost[pair]):
+            views = candidates[column][1]
+            if cost[row, column] >= _BIG or any((c, i) in used for c, i in views.items()):
+                continue
+            used.update(views.items())
+            for c, i in views.items():
+                observed[c, markers[row]] = unclaimed[c][i]
+                detected[c, markers[row]] = True
+
+    def _unclaimed_points(self, unclaimed):
+        """[(point (3,) [m], {camera: blob index})]: the unclaimed blobs of two cameras whose rays meet
+        (within agreement_m), with the nearest agreeing unclaimed blob of each other camera."""
+        s = self.settings
+        rays = [self._rays(c, blobs) if len(blobs) else None for c, blobs in enumerate(unclaimed)]
+        found = {}
+        for a, b in itertools.combinations(range(len(self.cameras)), 2):
+            if rays[a] is None or rays[b] is None:
+                continue
+            for i, j in itertools.product(range(len(unclaimed[a])), range(len(unclaimed[b]))):
+                pixels = np.full((len(self.cameras), 2), np.nan)
+                pixels[a], pixels[b] = unclaimed[a][i], unclaimed[b][j]
+                point = triangulate(self.cameras, pixels)[0]
+                if max(_ray_distance(rays[c][0], rays[c][1][k], point) for c, k in ((a, i), (b, j))) > s.agreement_m:
+                    continue
+                views = {a: i, b: j}
+                for c in range(len(self.cameras)):
+                    if c in views or rays[c] is None:
+                        continue
+                    distances = [_ray_distance(rays[c][0], direction, point) for direction in rays[c][1]]
+                    if min(distances) <= s.agreement_m:
+                        views[c] = int(np.argmin(distances))
+                key = frozenset(views.items())
+                if key not in found:
+                    pixels = np.full((len(self.cameras), 2), np.nan)
+                    for c, k in views.items():
+                        pixels[c] = unclaimed[c][k]
+                    found[key] = (triangulate(self.cameras, pixels)[0], views)
+        return list(found.values())
+
+    def _rays(self, c, pixels):
+        """Camera c's optical centre (3,) and unit rays (15, 3) through pixels (15, 2)."""
+        camera = self.cameras[c]
+        return camera.center, camera.rays(camera.undistort_pixels(pixels))
+
+    def _triangulated(self, pixels, views):
+        weights = np.zeros(len(self.cameras))
+        weights[list(views)] = 1.0
+        found = triangulate(self.cameras, pixels, weights)
+        return None if found is None else found[0]
+
+
+def _ray_distance(origin, direction, point):
+    """Distance [m] of `point` (3,) from the ray origin + s·direction (unit direction)."""
+    return float(np.linalg.norm(np.cross(point - origin, direction)))
