@@ -51,7 +51,7 @@ class MarkerTrackerNode(ReportOnce, Node):
             floating_point_range=[FloatingPointRange(from_value=0.0, to_value=60.0, step=0.0)]))
         self.fused_wait = self.get_parameter('fused_wait').value
         self.tracker = TRACKERS[method]()
-        self.queue = collections.deque()   # (rgb, header) of images tracked in turn
+        self.queue = collections.deque()   # (rgb, header, the labelled frame's tracks or None), in turn
         self.awaited = None                # (stamp [ns] of the last tracks published, when) until their fusion comes
         self.initialised = False
         self.labellings = {}   # stamp [ns] -> initial_markers message
@@ -95,6 +95,7 @@ class MarkerTrackerNode(ReportOnce, Node):
         self.publisher.publish(marker_tracks(header, [[0.0, 0.0]] * 15, [FLAG_LOST] * 15, status, reason))
 
     def process(self, rgb, header):
+        labelled = None   # the labelled frame's own tracks: its labelling snapped to the detections
         if not self.initialised:
             labelling = self.labellings.get(stamp_ns(header))
             if labelling is None:
@@ -112,10 +113,10 @@ class MarkerTrackerNode(ReportOnce, Node):
                 del self.labellings[stamp_ns(header)]
                 return self.reply(header, MarkerTracks.STATUS_BAD_INPUT, 'bad labelling',
                                   f'{self.resolve_topic_name("initial_markers")}: {error}; dropped')
-            self.tracker.initialise(rgb, positions, labelled_flags == MarkerTracks.FLAG_DETECTED)
+            labelled = self.tracker.initialise(rgb, positions, labelled_flags == MarkerTracks.FLAG_DETECTED)
             self.initialised, self.labellings, self.waiting_images = True, {}, {}
             self.get_logger().info(f'camera {self.camera}: initialised from the labelled frame at {stamp_ns(header)} ns')
-        self.queue.append((rgb, header))
+        self.queue.append((rgb, header, labelled))
         if len(self.queue) > QUEUED_IMAGES_KEPT:
             self.queue.popleft()
             self.report_once('queue', f'more than {QUEUED_IMAGES_KEPT} images waiting for {self.fused_topic}: '
@@ -129,8 +130,8 @@ class MarkerTrackerNode(ReportOnce, Node):
             if self.awaited is not None and time.monotonic() - self.awaited[1] < self.fused_wait \
                     and self.count_publishers(self.fused_topic) > 0:
                 return
-            rgb, header = self.queue.popleft()
-            positions, flags = self.tracker.track(rgb)
+            rgb, header, labelled = self.queue.popleft()
+            positions, flags = self.tracker.track(rgb) if labelled is None else labelled
             self.publisher.publish(marker_tracks(header, positions, flags, blobs=self.tracker.detections))
             self.awaited = (stamp_ns(header), time.monotonic())
 

@@ -54,12 +54,14 @@ _BIG = 1e9
 @dataclass(frozen=True)
 class ViewSettings:
     agreement_m: float = 0.03        # a view agrees with a 3D point when its ray passes this close [m]
-    jump_gate_m: float = 0.3         # a multi-view point this far from the prediction is refused [m] (plus
+    jump_gate_m: float = 0.3         # a limb marker's multi-view point this far from the prediction is refused [m] (plus
                                      # reacquire_growth_m per frame the marker has gone without two views)
+    region_jump_gate_m: float = 0.1  # ... a region marker's (the torso moves smoothly) [m]
     single_view_gate_m: float = 0.15  # one view's ray moves the prediction onto it when this close [m]
     blob_gate_m: float = 0.04        # a blob is paired with a triangulated marker's projection within this,
                                      # at the marker's depth [m] ...
     predicted_blob_gate_m: float = 0.09  # ... with a predicted marker's (one or no view) within this [m]
+    shape_tolerance_m: float = 0.04  # two region markers stay this close to their distance at the start [m]
     bone_tolerance_m: float = 0.05   # a limb marker stays this close to its first distance from its parent [m]
     reacquire_gate_m: float = 0.5    # a marker takes unclaimed blobs' 3D point at most this far from its estimate [m]
     reacquire_growth_m: float = 0.03  # ... the gate widening by this per frame without two views [m]
@@ -92,6 +94,7 @@ class MarkerViews:
             if found is not None:
                 points[marker] = found[0]
         self.points, self.velocity = points, np.zeros_like(points)
+        self.distances = np.linalg.norm(points[:, None] - points[None], axis=2)   # NaN where not placed
         self.lengths = np.full(len(MARKER_NAMES), np.nan)
         for child, parent in LIMB_PARENT.items():
             self.lengths[child] = np.linalg.norm(points[child] - points[parent])
@@ -134,6 +137,8 @@ class MarkerViews:
         rays = [self._rays(c, positions[c]) for c in range(len(self.cameras))]
         for marker in REGION_MARKERS:
             points[marker], support[marker] = self._triangulated_best(marker, positions, detected, rays, predicted)
+        for marker in self._out_of_shape(points, support, predicted):
+            points[marker], support[marker] = np.nan, 0
         for marker in REGION_MARKERS:
             if not support[marker]:
                 base = self._region_prediction(marker, points, support, predicted)
@@ -162,7 +167,8 @@ class MarkerViews:
                 continue
             gap = np.linalg.norm(found - predicted[marker]) if np.all(np.isfinite(predicted[marker])) else 0.0
             agree = [c for c in views if _ray_distance(rays[c][0], rays[c][1][marker], found) <= s.agreement_m]
-            if gap > s.jump_gate_m + s.reacquire_growth_m * self.unsupported_run[marker] or len(agree) < 2:
+            jump = s.jump_gate_m if marker in LIMB_PARENT else s.region_jump_gate_m
+            if gap > jump + s.reacquire_growth_m * self.unsupported_run[marker] or len(agree) < 2:
                 continue
             key = (len(agree), -gap)
             if best is None or key > best[0]:
@@ -170,6 +176,26 @@ class MarkerViews:
         if best is None:
             return np.full(3, np.nan), 0
         return self._triangulated(positions[:, marker], best[1]), len(best[1])
+
+    def _out_of_shape(self, points, support, predicted):
+        """Triangulated region markers that break their region's shape: a distance to another triangulated
+        marker of the region more than shape_tolerance_m off its distance at the start. Of a broken pair
+        the marker in more broken pairs goes, on a tie the one farther from its prediction (a marker
+        given a neighbour's blob in two views triangulates at that neighbour)."""
+        rejected = []
+        for region, indices in REGION_INDICES.items():
+            seen = [i for i in indices if support[i] >= 2]
+            broken = [(a, b) for a, b in itertools.combinations(seen, 2)
+                      if abs(np.linalg.norm(points[a] - points[b]) - self.distances[a, b]) > self.settings.shape_tolerance_m]
+            while broken:
+                count = {i: sum(i in pair for pair in broken) for i in seen}
+                gap = {i: np.linalg.norm(points[i] - predicted[i]) if np.all(np.isfinite(predicted[i])) else 0.0
+                       for i in seen}
+                worst = max(seen, key=lambda i: (count[i], gap[i]))
+                rejected.append(worst)
+                seen.remove(worst)
+                broken = [pair for pair in broken if worst not in pair]
+        return rejected
 
     def _region_prediction(self, marker, points, support, predicted):
         """A region marker without two agreeing views: moved with its region's triangulated markers, or at

@@ -1,11 +1,13 @@
 """`markers eval BAG`: marker mode (paper 001) against a synthetic marker bag's ground truth.
 
-Per camera, the region-constrained tracker (markers.MarkerTracker) and the nearest-neighbour baseline
-(markers.NearestNeighbourTracker) run over the bag's images, both initialised from the first frame's
-ground-truth markers (standing in for an operator's labelling of the calibration frame). Printed per
-marker: the mean and max 2D error [px] where the marker is visible and where it is hidden (the
-tracker's prediction), and identity swaps; then the markers triangulated across cameras
-(marker_triangulation) against the 3D ground truth [mm].
+Three methods run over the bag's images, each initialised from the first frame's ground-truth markers
+(standing in for an operator's labelling of the calibration frame): the nearest-neighbour baseline
+(markers.NearestNeighbourTracker) and paper 001's region-constrained tracker (markers.MarkerTracker),
+each camera on its own, and what the marker mode graph computes: the region tracker in every camera,
+the cameras' tracks fused in 3D each frame (marker_views.MarkerViews) and fed back to the trackers.
+Printed per marker: the mean and max 2D error [px] where the marker is visible and where it is hidden
+(the prediction), and identity swaps; then the 3D markers against the true centres [mm] (for the
+first two, triangulated from the detected markers by marker_triangulation).
 """
 import sys
 from pathlib import Path
@@ -14,6 +16,7 @@ import numpy as np
 
 from mvpose_nodes.errors import ArgumentParser, UserError, exit_on_user_error
 
+FUSED = 'regions + 3D fusion'   # the marker mode graph: marker_tracker per camera + marker_skeleton
 SWAP_RATIO = 2.0     # a marker nearer another marker's true position than this times its own error ...
 SWAP_MIN_PX = 5.0    # ... and more than this far from its own: an identity swap
 TARGETS = {'swaps': 0, 'visible': 2.0, 'predicted': 6.0}   # issue 7's targets [-, px, px]
@@ -47,7 +50,7 @@ def evaluate_bag(bag, cameras=None):
     sets = [s for s in sets if all(k in s.markers and k in s.images for k in numbers)]
     camera_of = {k: sets[0].cameras[k] for k in numbers}
     methods = {'nearest neighbour': NearestNeighbourTracker, 'regions (paper 001)': MarkerTracker,
-               'regions + 3 views': MarkerTracker}
+               FUSED: MarkerTracker}
     trackers = {method: {k: make() for k in numbers} for method, make in methods.items()}
     views = MarkerViews([camera_of[k] for k in numbers])
     results = {method: {k: [] for k in numbers} for method in methods}
@@ -61,24 +64,24 @@ def evaluate_bag(bag, cameras=None):
             for k in numbers:
                 tracker = trackers[method][k]
                 image = frame_set.images[k]
-                if index == 0:
-                    tracker.initialise(image, *truth[k])
-                tracks[method, k] = tracker.track(image)
+                # The labelled first frame's tracks are its labelling snapped to the detections.
+                tracks[method, k] = tracker.initialise(image, *truth[k]) if index == 0 else tracker.track(image)
         # As marker_skeleton does: started from the first frame's tracks, then every frame fused.
-        own = [tracks['regions + 3 views', k] for k in numbers]
+        own = [tracks[FUSED, k] for k in numbers]
         if index == 0:
             views.start([t[0] for t in own], [t[1] for t in own])
         points, positions, flags = views.fuse([t[0] for t in own], [t[1] for t in own],
-                                              [trackers['regions + 3 views'][k].detections for k in numbers])
+                                              # float32: the blobs as MarkerTracks carries them
+                                              [trackers[FUSED][k].detections.astype(np.float32) for k in numbers])
         fused_3d.append(points)
         for c, k in enumerate(numbers):
-            trackers['regions + 3 views'][k].correct(positions[c], flags[c])
-            tracks['regions + 3 views', k] = (positions[c], flags[c])
+            trackers[FUSED][k].correct(positions[c], flags[c])
+            tracks[FUSED, k] = (positions[c], flags[c])
         for (method, k), (estimate, estimate_flags) in tracks.items():
             results[method][k].append((estimate, estimate_flags, *truth[k]))
         progress.update()
     progress.close()
-    report(bag, results, camera_of, truth_3d, JOINT_NAMES, {'regions + 3 views': fused_3d})
+    report(bag, results, camera_of, truth_3d, JOINT_NAMES, {FUSED: fused_3d})
 
 
 def errors_and_swaps(runs):
