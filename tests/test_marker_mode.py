@@ -171,3 +171,21 @@ def test_markers_eval_compares_the_three_methods(tmp_path):
     result = run_mvpose('markers', 'eval', plain, check=False)
     assert result.returncode != 0
     assert f"bag '{plain}' has no ground-truth markers" in result.stderr and len(result.stderr.strip().splitlines()) == 1
+
+
+def test_a_bag_whose_markers_do_not_decode_is_refused_in_one_line(tmp_path):
+    """A MarkerTracks recorded with another definition (here its last bytes cut off, as an older
+    MarkerTracks without blobs reads) gives a one-line error naming the bag and topic, not a traceback."""
+    from rclpy.serialization import serialize_message
+    from std_msgs.msg import Header
+    from mvpose_nodes.bagfile import BagWriter
+    from mvpose_nodes.camera_bag import frame_sets
+    from mvpose_nodes.errors import UserError
+    from mvpose_nodes.rosconv import marker_tracks
+    data = serialize_message(marker_tracks(Header(), np.zeros((15, 2)), [FLAG_DETECTED] * 15, blobs=[[1.0, 2.0]]))
+    with BagWriter(tmp_path / 'old') as bag:
+        bag.add_topic('/cam3/ground_truth/markers', 'mvpose_msgs/msg/MarkerTracks')
+        bag.write('/cam3/ground_truth/markers', data[:-12], 0)
+    with pytest.raises(UserError, match=r"mvpose_msgs/msg/MarkerTracks on /cam3/ground_truth/markers does not decode") as error:
+        list(frame_sets(tmp_path / 'old'))
+    assert str(tmp_path / 'old') in str(error.value) and '\n' not in str(error.value)

@@ -138,7 +138,12 @@ def frame_sets(bag_path, cameras=None):
         number = int(match['camera']) if match else None
         if number is not None and wanted is not None and number not in wanted:
             continue
-        message = deserialize_message(data, message_class(info.type))
+        try:
+            message = deserialize_message(data, message_class(info.type))
+        except Exception as error:   # rclpy raises its RMWError: the bytes do not fit this build's type
+            raise UserError(f"bag '{bag_path}': a {info.type} on {info.name} does not decode with this "
+                            f"workspace's {info.type} (recorded with an older definition? make the bag again): "
+                            f"{str(error).splitlines()[0]}") from None
         if match and match['kind'] in ('camera_info', 'camera_pose'):
             calibration.setdefault(number, {})[match['kind']] = message
             continue
