@@ -159,13 +159,22 @@ def test_markers_eval_compares_the_three_methods(tmp_path):
     bag = tmp_path / 'markers'
     run_mvpose('synth', '--markers', '--cameras', 3, 5, 7, '--frames', '60-63', '--resolution', '960x540', '-o', bag,
                timeout=300)
-    out = run_mvpose('markers', 'eval', bag, timeout=300).stdout
+    out = run_mvpose('markers', 'eval', bag, '--pictures', tmp_path / 'pictures', timeout=300).stdout
     totals = out[out.index('  totals'):].splitlines()[1:4]
     rows = {line[:25].strip(): [float(v) for v in line[25:].replace('/', ' ').split()] for line in totals}
     assert set(rows) == {'nearest neighbour', 'regions (paper 001)', 'regions + 3D fusion'}, out
     # What the views buy: the fused 3D markers are nearer the truth than either method's own triangulation.
     visible, hidden, swaps, mean_3d, max_3d = rows['regions + 3D fusion']
     assert 0 <= visible < 5 and mean_3d < min(rows['nearest neighbour'][3], rows['regions (paper 001)'][3]), out
+    # The pictures: a tile per camera, the detected markers' green dots on them.
+    import cv2
+    pictures = sorted((tmp_path / 'pictures').glob('markers_frame*_*.png'))
+    assert [p.name.rsplit('_', 1)[-1] for p in pictures].count('worst.png') == 1 and len(pictures) == 2, out
+    for picture in pictures:
+        assert f'wrote {picture}' in out
+        rgb = cv2.cvtColor(cv2.imread(str(picture)), cv2.COLOR_BGR2RGB)
+        assert rgb.shape[1] == 3 * 560
+        assert np.sum(np.all(np.abs(rgb.astype(int) - (60, 220, 60)) < 12, axis=2)) > 3 * 50
     plain = tmp_path / 'plain'
     run_mvpose('synth', '--cameras', 3, 5, '--frames', '60-60', '--resolution', '480x270', '-o', plain, timeout=300)
     result = run_mvpose('markers', 'eval', plain, check=False)

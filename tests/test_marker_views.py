@@ -104,3 +104,22 @@ def test_two_views_agreeing_on_a_point_far_from_the_prediction_are_refused(walk,
     points, _, _ = views.fuse(tracks, flags)   # the blobs: where the tracks say they detected markers
     assert views.support[HEAD] < 2
     assert np.linalg.norm(points[HEAD] - walk[1, HEAD]) < 0.1   # moved with the shoulders instead
+
+
+def test_a_lost_limb_marker_seen_again_by_one_view_takes_its_blob(walk, cameras):
+    views = started(cameras, walk[0])
+    for f in range(1, 16):                      # hidden in every camera
+        truth = projections(cameras, walk[f])
+        tracks, flags = truth.copy(), np.full((3, 15), FLAG_DETECTED)
+        flags[:, WRIST] = FLAG_PREDICTED
+        views.fuse(tracks, flags, [np.delete(truth[c], WRIST, axis=0) for c in range(3)])
+    assert np.linalg.norm(views.points[WRIST] - walk[16, WRIST]) > views.settings.single_view_gate_m
+    truth = projections(cameras, walk[16])
+    tracks, flags = truth.copy(), np.full((3, 15), FLAG_DETECTED)
+    flags[:, WRIST] = FLAG_PREDICTED
+    blobs = [truth[0]] + [np.delete(truth[c], WRIST, axis=0) for c in (1, 2)]   # back in camera 3 only
+    points, positions, fused_flags = views.fuse(tracks, flags, blobs)
+    assert views.support[WRIST] == 1 and fused_flags[:, WRIST].tolist() == [FLAG_DETECTED, FLAG_PREDICTED, FLAG_PREDICTED]
+    np.testing.assert_allclose(positions[0, WRIST], truth[0, WRIST], atol=1e-6)
+    # On that view's ray at its distance from the elbow: within the shell's tolerance of the truth.
+    assert np.linalg.norm(points[WRIST] - walk[16, WRIST]) < 2 * views.settings.bone_tolerance_m

@@ -183,3 +183,28 @@ def test_animation_falls_back_to_a_png_strip_without_mp4(tmp_path, monkeypatch):
     assert path == tmp_path / 'walk.png' and not (tmp_path / 'walk.mp4').exists()
     strip = read_rgb(path)
     assert strip.shape == (180, 8 * 320, 3)  # 8 frames of 640×360 at half size
+
+
+def test_marker_sheet_draws_estimates_by_flag_and_joins_the_ones_off(tmp_path):
+    from mvpose_nodes.report_pictures import MARKER_FLAG_COLOURS, marker_label, marker_sheet
+    rng = np.random.default_rng(3)
+    truth = rng.uniform(100, 500, (15, 2))
+    estimate, flags = truth.copy(), np.zeros(15, np.uint8)
+    estimate[11] += (0.0, 60.0)                                  # left wrist predicted 60 px low
+    flags[11] = 1
+    image = np.full((600, 600, 3), BLUE, np.uint8)
+    path = marker_sheet({3: image}, {3: (estimate, flags)}, {3: (truth, np.ones(15, bool))}, tmp_path / 'm.png',
+                        tile_width=600, title='test')
+    rgb = read_rgb(path)
+    assert rgb.shape[1] == 600 and marker_label('left_wrist') == 'LW' and marker_label('pelvis') == 'P'
+
+    tiles = rgb[:-34]                                   # above the legend
+
+    def count(colour):
+        return int(np.sum(np.all(np.abs(tiles.astype(int) - colour) < 12, axis=2)))
+    assert count(MARKER_FLAG_COLOURS[0]) > 14 * 40    # 14 detected dots
+    assert count(MARKER_FLAG_COLOURS[1]) > 40         # the predicted wrist
+    assert count((230, 40, 40)) > 60                   # its red line to the truth, about 60 px × crop scale
+    exact = read_rgb(marker_sheet({3: image}, {3: (truth, flags)}, {3: (truth, np.ones(15, bool))},
+                                  tmp_path / 'exact.png', tile_width=600))[:-34]
+    assert not np.any(np.all(np.abs(exact.astype(int) - (230, 40, 40)) < 12, axis=2))   # nothing off: no line

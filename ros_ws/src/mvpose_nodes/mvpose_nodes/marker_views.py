@@ -8,19 +8,25 @@ Per frame (`MarkerViews.fuse`):
    within `agreement_m` of it (a distance in metres at the marker, the same for near and far cameras).
    The pair with the most agreeing views wins, ties going to the point nearer the marker's predicted
    position; the point is then triangulated again from all the views that agree. A view that disagrees
-   has given the marker another marker's blob (an identity swap in that view). A pair farther than
-   `jump_gate_m` from the prediction (more, the longer the marker has gone without two views) is not
-   used: two views that made the same mistake.
+   has given the marker another marker's blob (an identity swap in that view). Refused: a pair farther
+   from the prediction than `jump_gate_m` (limbs) or `region_jump_gate_m` (the smoothly moving torso and
+   head), more the longer the marker has gone without two views (two views that made the same mistake);
+   a limb marker off its distance from its parent marker (`bone_tolerance_m`, doubled); a region marker
+   that breaks its region's shape at the start (`shape_tolerance_m`).
 2. A marker without two agreeing views is predicted: a region marker (markers.REGIONS) moves with the
    mean 3D displacement of its region's triangulated markers (the head with the shoulders'), the 3D form
-   of paper 001's region displacement; a limb marker, or a region marker whose region has none, at
-   constant velocity. One detecting view then pulls the prediction onto its ray (the ray's point
-   nearest to it) when the ray passes within `single_view_gate_m`.
+   of paper 001's region displacement, or at constant velocity (damped) when none is; a limb marker is
+   carried by its parent, at its distance from it (velocities run away over long occlusions). One
+   detecting view then pulls the prediction onto its ray: the ray's point nearest to it when within
+   `single_view_gate_m`, or, for a limb marker lost a frame or more, the point where the ray meets its
+   parent's shell.
 3. In each camera, the 15 points are projected and the image's red blobs (all of them, assigned by its
    tracker or not) are paired with the projections by the Hungarian method, each gated at `blob_gate_m`
-   at the marker's depth: a blob's identity is now the one that agrees with the other views. A paired
-   marker is DETECTED at its blob; an unpaired one is PREDICTED at its projection (the prediction the
-   paper makes in 2D, here from the other views of the same instant).
+   (`predicted_blob_gate_m` for a predicted marker) at the marker's depth: a blob's identity is now the
+   one that agrees with the other views. A paired marker is DETECTED at its blob; an unpaired one is
+   PREDICTED at its projection (the prediction the paper makes in 2D, here from the other views).
+   Blobs that no marker claimed get lost markers back (`_reacquire`): those meeting in two or more
+   views, and, for a lost limb marker, a single view's blob whose ray meets its parent's shell.
 4. Steps 1 and 3 run twice: the second time from the blobs as re-assigned in step 3.
 
 The result goes back to each camera's tracker (markers._TrackerBase.correct), so the next frame's
@@ -208,12 +214,17 @@ class MarkerViews:
     def _on_a_ray(self, marker, base, detected, rays, parent=None):
         """(point, 1) on the detecting view's ray nearest to `base` (for a limb marker: within its
         distance of `parent`) when within single_view_gate_m of it; else (base, 0)."""
+        s = self.settings
+        # A lost limb marker can be anywhere its parent reaches: its ray must meet the shell instead.
+        lost_limb = parent is not None and self.unsupported_run[marker] > 0 and np.isfinite(self.lengths[marker])
         best = None
         for c in np.flatnonzero(detected[:, marker]):
             origin, direction = rays[c][0], rays[c][1][marker]
             point = self._ray_point(marker, origin, direction, base, parent)
             gap = np.linalg.norm(point - base)
-            if gap <= self.settings.single_view_gate_m and (best is None or gap < best[0]):
+            near = (self._near_shell(marker, point, parent, s.bone_tolerance_m + 1e-9) if lost_limb
+                    else gap <= s.single_view_gate_m)
+            if near and (best is None or gap < best[0]):
                 best = (gap, point)
         return (base, 0) if best is None else (best[1], 1)
 
@@ -282,25 +293,53 @@ class MarkerViews:
         s = self.settings
         markers = np.flatnonzero(support < 2)
         candidates = self._unclaimed_points(unclaimed)
-        if not len(markers) or not candidates:
+        if not len(markers):
             return
         cost = np.full((len(markers), len(candidates)), _BIG)
         for row, marker in enumerate(markers):
             parent = points[LIMB_PARENT[marker]] if marker in LIMB_PARENT else None
             gate = min(s.reacquire_gate_m, s.blob_gate_m + s.reacquire_growth_m * self.unsupported_run[marker])
+            if parent is not None and self.unsupported_run[marker]:
+                gate = np.inf   # a lost limb marker can be anywhere its parent reaches: the shell decides
             for column, (point, _) in enumerate(candidates):
                 gap = np.linalg.norm(point - points[marker])
                 if gap <= gate and self._near_shell(marker, point, parent, 2.0 * s.bone_tolerance_m):
                     cost[row, column] = gap
-        used = set()
-        for row, column in sorted(zip(*linear_sum_assignment(cost)), key=lambda pair: cost[pair]):
+        used, taken = set(), set()
+        for row, column in (sorted(zip(*linear_sum_assignment(cost)), key=lambda pair: cost[pair]) if candidates else ()):
             views = candidates[column][1]
             if cost[row, column] >= _BIG or any((c, i) in used for c, i in views.items()):
                 continue
             used.update(views.items())
+            taken.add(markers[row])
             for c, i in views.items():
                 observed[c, markers[row]] = unclaimed[c][i]
                 detected[c, markers[row]] = True
+        self._reacquire_in_one_view(points, support, observed, detected, unclaimed, used, taken)
+
+    def _reacquire_in_one_view(self, points, support, observed, detected, unclaimed, used, taken):
+        """Step 3c: a limb marker lost (no view for a frame or more) and not found in step 3b takes an
+        unclaimed blob of a single view whose ray meets its parent's shell (its distance from its parent
+        ± bone_tolerance_m), the nearest to its estimate, by the Hungarian method: the first view that
+        sees it again brings it back (an occluder still hiding it from the others)."""
+        lost = [m for m in LIMB_PARENT if support[m] == 0 and self.unsupported_run[m] and m not in taken
+                and np.isfinite(self.lengths[m])]
+        blobs = [(c, i) for c in range(len(self.cameras)) for i in range(len(unclaimed[c])) if (c, i) not in used]
+        if not lost or not blobs:
+            return
+        rays = {c: self._rays(c, unclaimed[c]) for c in {c for c, _ in blobs}}
+        cost = np.full((len(lost), len(blobs)), _BIG)
+        for row, marker in enumerate(lost):
+            parent = points[LIMB_PARENT[marker]]
+            for column, (c, i) in enumerate(blobs):
+                point = self._ray_point(marker, rays[c][0], rays[c][1][i], points[marker], parent)
+                if self._near_shell(marker, point, parent, self.settings.bone_tolerance_m + 1e-9):
+                    cost[row, column] = np.linalg.norm(point - points[marker])
+        for row, column in zip(*linear_sum_assignment(cost)):
+            if cost[row, column] < _BIG:
+                c, i = blobs[column]
+                observed[c, lost[row]] = unclaimed[c][i]
+                detected[c, lost[row]] = True
 
     def _unclaimed_points(self, unclaimed):
         """[(point (3,) [m], {camera: blob index})]: the unclaimed blobs of two cameras whose rays meet

@@ -29,13 +29,16 @@ def markers_main(argv=None, prog='markers'):
                                    description=__doc__.split('\n\n')[1])
     evaluate.add_argument('bag', type=Path, help='a bag made by ./mvpose synth --markers')
     evaluate.add_argument('--cameras', type=int, nargs='+', metavar='K', help='cameras to track (default: all in the bag)')
+    evaluate.add_argument('--pictures', type=Path, metavar='DIR',
+                          help='also draw the fused tracks over every camera at the frame with the most hidden '
+                               'markers and at the worst frame (DIR/markers_frame<N>_*.png)')
     args = parser.parse_args(sys.argv[1:] if argv is None else argv)
     with exit_on_user_error(prog):
-        evaluate_bag(args.bag, args.cameras)
+        evaluate_bag(args.bag, args.cameras, args.pictures)
     return 0
 
 
-def evaluate_bag(bag, cameras=None):
+def evaluate_bag(bag, cameras=None, pictures=None):
     from mvpose_nodes.body_model import JOINT_NAMES
     from mvpose_nodes.camera_bag import frame_sets
     from mvpose_nodes.marker_views import MarkerViews
@@ -82,6 +85,9 @@ def evaluate_bag(bag, cameras=None):
         progress.update()
     progress.close()
     report(bag, results, camera_of, truth_3d, JOINT_NAMES, {FUSED: fused_3d})
+    if pictures is not None:
+        for path in draw_frames(pictures, sets, results[FUSED]):
+            print(f'  wrote {path}')
 
 
 def errors_and_swaps(runs):
@@ -146,6 +152,24 @@ def report(bag, results, camera_of, truth_3d, names, fused_3d):
         print(f'  {method:<22} {v:>12.2f} {h:>17.2f} {s:>15d}   {mean_3d:>10.1f} / {max_3d:.1f}')
     print(f'  targets: {TARGETS["swaps"]} identity swaps, visible mean <= {TARGETS["visible"]} px, '
           f'hidden (predicted) mean <= {TARGETS["predicted"]} px')
+
+
+def draw_frames(directory, sets, runs):
+    """The fused tracks drawn over every camera (report_pictures.marker_sheet) at the frame with the most
+    hidden markers and at the frame with the largest mean error; the paths written."""
+    from mvpose_nodes.report_pictures import marker_sheet
+    cameras = sorted(runs)
+    errors = np.mean([errors_and_swaps(runs[k])[0] for k in cameras], axis=(0, 2))       # (F,)
+    hidden = np.sum([[~r[3] for r in runs[k]] for k in cameras], axis=(0, 2))          # (F,)
+    written = []
+    for kind, f in (('most_hidden', int(np.argmax(hidden))), ('worst', int(np.argmax(errors)))):
+        frame = sets[f].frame
+        title = (f'frame {frame}: {int(hidden[f])} hidden marker views, mean error {errors[f]:.1f} px '
+                 f'(regions + 3D fusion)')
+        written.append(marker_sheet({k: sets[f].images[k] for k in cameras},
+                                    {k: runs[k][f][:2] for k in cameras}, {k: runs[k][f][2:] for k in cameras},
+                                    Path(directory) / f'markers_frame{frame}_{kind}.png', title=title))
+    return written
 
 
 def triangulated(runs, camera_of):

@@ -5,7 +5,8 @@
 - `contact_sheet`: paper 000's Fig. 10, every camera with the fitted and the ground-truth
   skeletons projected on;
 - `animation`: an MP4 of the fitted skeleton over one camera's images, or in 3D seen from a
-  virtual camera circling the person.
+  virtual camera circling the person;
+- `marker_sheet`: marker mode, every camera's tracked markers beside their true positions.
 
 `draw_skeleton` is the one skeleton drawing function of the project (`preview` uses it too).
 
@@ -384,6 +385,74 @@ def contact_sheet(images, cameras, fitted_joints, truth_joints, path, columns=4,
     for i, tile in enumerate(tiles):
         r, c = divmod(i, columns)
         sheet[band + r * tile_height:band + r * tile_height + tile.shape[0], c * tile_width:(c + 1) * tile_width] = tile
+    return write_png(path, sheet)
+
+
+# ---------------------------------------------------------------- marker mode
+
+MARKER_FLAG_COLOURS = ((60, 220, 60), (250, 210, 40), (230, 40, 40))   # RGB of FLAG_DETECTED, _PREDICTED, _LOST
+MARKER_SHORT_NAMES = {'pelvis': 'P', 'neck': 'N', 'head': 'H'}
+
+
+def marker_label(name):
+    """'left_wrist' -> 'LW'; pelvis, neck, head -> 'P', 'N', 'H'."""
+    return MARKER_SHORT_NAMES.get(name) or ''.join(part[0].upper() for part in name.split('_'))
+
+
+def marker_sheet(images, tracks, truth, path, columns=3, tile_width=560, title=None):
+    """Marker mode's tracks over the images, one tile per camera, cropped to the person.
+
+    images: {camera number: RGB uint8 (H, W, 3)}; tracks: {number: (positions (15, 2) [px], flags (15,)
+    FLAG_*)}; truth: {number: (positions (15, 2) [px], visible (15,) bool)}. Each estimate is a dot
+    coloured by its flag (detected green, predicted yellow, lost red) with its short name (LW = left
+    wrist); the true position is a white ring (thin where the marker is hidden), joined to the estimate
+    by a red line when they are more than 3 px apart. Returns the Path written."""
+    tiles = []
+    for number in sorted(images):
+        image = images[number]
+        positions, flags = (np.asarray(a) for a in tracks[number])
+        true_positions, visible = (np.asarray(a) for a in truth[number])
+        points = np.vstack([true_positions, positions[np.isfinite(positions).all(axis=1)]])
+        low, high = points.min(axis=0), points.max(axis=0)
+        pad = 0.15 * max(high - low) + 20
+        x0, y0 = np.maximum(np.floor(low - pad), 0).astype(int)
+        x1, y1 = np.minimum(np.ceil(high + pad), (image.shape[1] - 1, image.shape[0] - 1)).astype(int)
+        scale = tile_width / max(x1 - x0, 1)
+        tile = cv2.resize(image[y0:y1, x0:x1], (tile_width, max(1, round((y1 - y0) * scale))), interpolation=cv2.INTER_AREA)
+
+        def at(p):
+            return (int(round((p[0] - x0) * scale)), int(round((p[1] - y0) * scale)))
+        for i, name in enumerate(JOINT_NAMES):
+            cv2.circle(tile, at(true_positions[i]), 9, COLOURS['truth'], 2 if visible[i] else 1, cv2.LINE_AA)
+            if not np.isfinite(positions[i]).all():
+                continue
+            if np.linalg.norm(positions[i] - true_positions[i]) > 3.0:
+                cv2.line(tile, at(positions[i]), at(true_positions[i]), (230, 40, 40), 2, cv2.LINE_AA)
+            colour = MARKER_FLAG_COLOURS[min(int(flags[i]), 2)]
+            cv2.circle(tile, at(positions[i]), 5, colour, -1, cv2.LINE_AA)
+            x, y = at(positions[i])
+            put_text(tile, marker_label(name), (x + 8, y - 6), 0.45, colour=colour)
+        put_text(tile, f'cam {number}', (10, 26), 0.7, thickness=2)
+        tiles.append(tile)
+    if not tiles:
+        raise ValueError('marker_sheet needs at least one camera image')
+    columns = max(1, min(columns, len(tiles)))
+    rows = math.ceil(len(tiles) / columns)
+    tile_height = max(t.shape[0] for t in tiles)
+    band, legend = (40 if title else 0), 34
+    sheet = np.zeros((band + rows * tile_height + legend, columns * tile_width, 3), np.uint8)
+    if title:
+        put_text(sheet, title, (12, 28), 0.7, thickness=2)
+    for i, tile in enumerate(tiles):
+        r, c = divmod(i, columns)
+        sheet[band + r * tile_height:band + r * tile_height + tile.shape[0], c * tile_width:(c + 1) * tile_width] = tile
+    y, x = sheet.shape[0] - 12, 12
+    for label, colour in zip(('detected', 'predicted (hidden)', 'lost'), MARKER_FLAG_COLOURS):
+        cv2.circle(sheet, (x + 6, y - 5), 5, colour, -1, cv2.LINE_AA)
+        put_text(sheet, label, (x + 16, y), 0.5, box=False)
+        x += 30 + cv2.getTextSize(label, FONT, 0.5, 1)[0][0]
+    cv2.circle(sheet, (x + 8, y - 5), 8, COLOURS['truth'], 2, cv2.LINE_AA)
+    put_text(sheet, 'true position (thin: hidden); red line: off by more than 3 px', (x + 22, y), 0.5, box=False)
     return write_png(path, sheet)
 
 
