@@ -123,3 +123,18 @@ def test_a_lost_limb_marker_seen_again_by_one_view_takes_its_blob(walk, cameras)
     np.testing.assert_allclose(positions[0, WRIST], truth[0, WRIST], atol=1e-6)
     # On that view's ray at its distance from the elbow: within the shell's tolerance of the truth.
     assert np.linalg.norm(points[WRIST] - walk[16, WRIST]) < 2 * views.settings.bone_tolerance_m
+
+
+def test_two_views_alone_may_not_move_a_limb_marker_far_three_may(walk, cameras):
+    moved = walk[1].copy()
+    moved[WRIST] += (0.08, 0.0, 0.0)           # 8 cm off its prediction: fast for a wrist within 40 ms
+    truth, shifted = projections(cameras, walk[1]), projections(cameras, moved)
+    for agreeing, supported in ((2, False), (3, True)):
+        views = started(cameras, walk[0])
+        tracks, flags = truth.copy(), np.full((3, 15), FLAG_DETECTED)
+        tracks[:agreeing, WRIST] = shifted[:agreeing, WRIST]
+        flags[agreeing:, WRIST] = FLAG_PREDICTED
+        points, _, _ = views.fuse(tracks, flags)
+        assert (views.support[WRIST] >= 2) == supported
+        if supported:
+            np.testing.assert_allclose(points[WRIST], moved[WRIST], atol=1e-6)

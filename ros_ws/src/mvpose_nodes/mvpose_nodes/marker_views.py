@@ -8,9 +8,10 @@ Per frame (`MarkerViews.fuse`):
    within `agreement_m` of it (a distance in metres at the marker, the same for near and far cameras).
    The pair with the most agreeing views wins, ties going to the point nearer the marker's predicted
    position; the point is then triangulated again from all the views that agree. A view that disagrees
-   has given the marker another marker's blob (an identity swap in that view). Refused: a pair farther
-   from the prediction than `jump_gate_m` (limbs) or `region_jump_gate_m` (the smoothly moving torso and
-   head), more the longer the marker has gone without two views (two views that made the same mistake);
+   has given the marker another marker's blob (an identity swap in that view). Refused: a point farther
+   from the prediction than `jump_gate_m` (limbs; `two_view_jump_gate_m` when only two views agree) or
+   `region_jump_gate_m` (the smoothly moving torso and head), more the longer the marker has gone
+   without two views (two views that made the same mistake, or a wrong blob along their epipolar line);
    a limb marker off its distance from its parent marker (`bone_tolerance_m`, doubled); a region marker
    that breaks its region's shape at the start (`shape_tolerance_m`).
 2. A marker without two agreeing views is predicted: a region marker (markers.REGIONS) moves with the
@@ -60,8 +61,10 @@ _BIG = 1e9
 @dataclass(frozen=True)
 class ViewSettings:
     agreement_m: float = 0.03        # a view agrees with a 3D point when its ray passes this close [m]
-    jump_gate_m: float = 0.3         # a limb marker's multi-view point this far from the prediction is refused [m] (plus
+    jump_gate_m: float = 0.3         # a limb marker's point this far from the prediction is refused [m] (plus
                                      # reacquire_growth_m per frame the marker has gone without two views)
+    two_view_jump_gate_m: float = 0.05  # ... a limb marker's seen by two views only [m] (a wrong blob
+                                        # along their epipolar line makes a consistent pair)
     region_jump_gate_m: float = 0.1  # ... a region marker's (the torso moves smoothly) [m]
     single_view_gate_m: float = 0.15  # one view's ray moves the prediction onto it when this close [m]
     blob_gate_m: float = 0.04        # a blob is paired with a triangulated marker's projection within this,
@@ -173,7 +176,8 @@ class MarkerViews:
                 continue
             gap = np.linalg.norm(found - predicted[marker]) if np.all(np.isfinite(predicted[marker])) else 0.0
             agree = [c for c in views if _ray_distance(rays[c][0], rays[c][1][marker], found) <= s.agreement_m]
-            jump = s.jump_gate_m if marker in LIMB_PARENT else s.region_jump_gate_m
+            jump = s.region_jump_gate_m if marker not in LIMB_PARENT else \
+                s.jump_gate_m if len(agree) >= 3 else s.two_view_jump_gate_m
             if gap > jump + s.reacquire_growth_m * self.unsupported_run[marker] or len(agree) < 2:
                 continue
             key = (len(agree), -gap)
