@@ -42,7 +42,7 @@ from scipy.optimize import linear_sum_assignment
 
 from mvpose_nodes.markers import FLAG_DETECTED, FLAG_LOST, FLAG_PREDICTED, MARKER_NAMES, REGION_INDICES, \
     gated_assignment
-from mvpose_nodes.triangulation import triangulate
+from mvpose_nodes.triangulation import dlt_point, triangulate
 
 # The region whose motion carries each region marker when it cannot be triangulated: its own region,
 # except the head (one marker), which moves with the shoulders.
@@ -169,13 +169,15 @@ class MarkerViews:
         within its distance from its parent's `parent` point (± 2 × bone_tolerance_m)."""
         s = self.settings
         views = np.flatnonzero(detected[:, marker])
+        origins = np.array([rays[c][0] for c in views]).reshape(-1, 3)
+        directions = np.array([rays[c][1][marker] for c in views]).reshape(-1, 3)
         best = None
         for pair in itertools.combinations(views, 2):
-            found = self._triangulated(positions[:, marker], pair)
+            found = self._triangulated(marker, rays, pair)
             if found is None or not self._near_shell(marker, found, parent, 2.0 * s.bone_tolerance_m):
                 continue
             gap = np.linalg.norm(found - predicted[marker]) if np.all(np.isfinite(predicted[marker])) else 0.0
-            agree = [c for c in views if _ray_distance(rays[c][0], rays[c][1][marker], found) <= s.agreement_m]
+            agree = views[np.linalg.norm(np.cross(found - origins, directions), axis=1) <= s.agreement_m].tolist()
             jump = s.region_jump_gate_m if marker not in LIMB_PARENT else \
                 s.jump_gate_m if len(agree) >= 3 else s.two_view_jump_gate_m
             if gap > jump + s.reacquire_growth_m * self.unsupported_run[marker] or len(agree) < 2:
@@ -185,7 +187,7 @@ class MarkerViews:
                 best = (key, agree)
         if best is None:
             return np.full(3, np.nan), 0
-        return self._triangulated(positions[:, marker], best[1]), len(best[1])
+        return self._triangulated(marker, rays, best[1]), len(best[1])
 
     def _out_of_shape(self, points, support, predicted):
         """Triangulated region markers that break their region's shape: a distance to another triangulated
@@ -376,15 +378,17 @@ class MarkerViews:
         return list(found.values())
 
     def _rays(self, c, pixels):
-        """Camera c's optical centre (3,) and unit rays (15, 3) through pixels (15, 2)."""
+        """Camera c's optical centre (3,), unit rays (N, 3) through pixels (N, 2), and the pixels' ideal
+        normalised coordinates (N, 2)."""
         camera = self.cameras[c]
-        return camera.center, camera.rays(camera.undistort_pixels(pixels))
+        normalized = camera.undistort_pixels(pixels)
+        return camera.center, camera.rays(normalized), normalized
 
-    def _triangulated(self, pixels, views):
-        weights = np.zeros(len(self.cameras))
-        weights[list(views)] = 1.0
-        found = triangulate(self.cameras, pixels, weights)
-        return None if found is None else found[0]
+    def _triangulated(self, marker, rays, views):
+        """A marker's DLT point (3,) [m] from `views` (2 or more) of `rays` (as _rays gives them)."""
+        views = list(views)
+        return dlt_point([self.cameras[c] for c in views], np.array([rays[c][2][marker] for c in views]),
+                         np.ones(len(views)))
 
 
 def _ray_distance(origin, direction, point):

@@ -12,8 +12,9 @@ import itertools
 import numpy as np
 
 
-def _dlt(cameras, normalized, weights):
-    """The DLT point (3,) [m] from ideal normalised coordinates (C, 2) and row weights (C,) (all used)."""
+def dlt_point(cameras, normalized, weights):
+    """The DLT point (3,) [m] from ideal normalised coordinates (C, 2) (distortion removed, K divided out:
+    Camera.undistort_pixels) and row weights (C,) (all used; at least 2 views)."""
     rows = []
     for camera, (u, v), weight in zip(cameras, normalized, weights):
         P = np.column_stack([camera.R, camera.t])
@@ -49,7 +50,7 @@ def triangulate(cameras, pixels, weights=None):
         return None
     views = [cameras[index] for index in used]
     normalized = np.array([camera.undistort_pixels(pixels[index][None])[0] for camera, index in zip(views, used)])
-    point = _dlt(views, normalized, weights[used])
+    point = dlt_point(views, normalized, weights[used])
     return point, float(np.sqrt(_squared_errors(views, point, pixels[used]).mean()))
 
 
@@ -79,7 +80,7 @@ def best_assignment(cameras, left_pixels, right_pixels, weights=None):
             if len(used) < 2:
                 break
             used_cameras = [cameras[index] for index in used]
-            points.append(_dlt(used_cameras, normalized[used, chosen[used]], weights[used, chosen[used]]))
+            points.append(dlt_point(used_cameras, normalized[used, chosen[used]], weights[used, chosen[used]]))
             error += _squared_errors(used_cameras, points[-1], pixels[used, chosen[used]]).sum()
         else:
             # Every observation feeds exactly one of the two points, so the totals compare like with like.
