@@ -135,13 +135,13 @@ def report(fitted, truth, bag):
     distance = np.linalg.norm(fitted - truth, axis=2) * 1000.0   # (F, 15)
     per_frame = distance.mean(axis=1)                            # Eq. 12
     print(f'eval: {bag}  ({len(fitted)} frames matched by stamp)   errors in mm')
-    print(f'  {"joint":<16} {"|ΔX| mean±std":>15} {"|ΔY| mean±std":>15} {"|ΔZ| mean±std":>15} '
+    print(f'  {"joint":<18} {"|ΔX| mean±std":>15} {"|ΔY| mean±std":>15} {"|ΔZ| mean±std":>15} '
           f'{"mean dist":>10} {"paper":>7}')
     for j, name in enumerate(JOINT_NAMES):
         cells = ' '.join(f'{delta[:, j, a].mean():>7.1f}±{delta[:, j, a].std():<7.1f}' for a in range(3))
-        print(f'  P{j + 1:<2} {name:<12} {cells} {distance[:, j].mean():>10.1f} {PAPER_JOINT_ERRORS[j]:>7.1f}')
+        print(f'  P{j + 1:<2} {name:<14} {cells} {distance[:, j].mean():>10.1f} {PAPER_JOINT_ERRORS[j]:>7.1f}')
     cells = ' '.join(f'{delta[..., a].mean():>7.1f}±{delta[..., a].std():<7.1f}' for a in range(3))
-    print(f'  {"mean":<16} {cells} {distance.mean():>10.1f} {PAPER_MEAN:>7.1f}')
+    print(f'  {"mean":<18} {cells} {distance.mean():>10.1f} {PAPER_MEAN:>7.1f}')
     print(f'  Eq. 12 per frame: mean {per_frame.mean():.1f} mm, median {np.median(per_frame):.1f}, '
           f'max {per_frame.max():.1f}  (paper: 44.4 mm Table 2 mean; aim <= 25 mm)')
     swaps = 0
