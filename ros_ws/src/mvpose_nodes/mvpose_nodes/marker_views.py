@@ -145,7 +145,7 @@ class MarkerViews:
         support = np.zeros(count, int)
         rays = [self._rays(c, positions[c]) for c in range(len(self.cameras))]
         for marker in REGION_MARKERS:
-            points[marker], support[marker] = self._triangulated_best(marker, positions, detected, rays, predicted)
+            points[marker], support[marker] = self._triangulated_best(marker, detected, rays, predicted)
         for marker in self._out_of_shape(points, support, predicted):
             points[marker], support[marker] = np.nan, 0
         for marker in REGION_MARKERS:
@@ -154,8 +154,7 @@ class MarkerViews:
                 points[marker], support[marker] = self._on_a_ray(marker, base, detected, rays)
         for marker in LIMB_MARKERS:   # parents first
             parent = LIMB_PARENT[marker]
-            points[marker], support[marker] = self._triangulated_best(marker, positions, detected, rays, predicted,
-                                                                      points[parent])
+            points[marker], support[marker] = self._triangulated_best(marker, detected, rays, predicted, points[parent])
             if not support[marker]:
                 # Hidden: carried by its parent marker (as the 2D tracker carries a hidden limb with its
                 # region; a velocity runs away over a long occlusion), kept at its distance from it.
@@ -164,7 +163,7 @@ class MarkerViews:
                 points[marker], support[marker] = self._on_a_ray(marker, base, detected, rays, points[parent])
         return points, support
 
-    def _triangulated_best(self, marker, positions, detected, rays, predicted, parent=None):
+    def _triangulated_best(self, marker, detected, rays, predicted, parent=None):
         """Step 1 for one marker: (point (3,), agreeing views) or (NaN, 0). A limb marker's point must lie
         within its distance from its parent's `parent` point (± 2 × bone_tolerance_m)."""
         s = self.settings
@@ -174,7 +173,7 @@ class MarkerViews:
         best = None
         for pair in itertools.combinations(views, 2):
             found = self._triangulated(marker, rays, pair)
-            if found is None or not self._near_shell(marker, found, parent, 2.0 * s.bone_tolerance_m):
+            if not self._near_shell(marker, found, parent, 2.0 * s.bone_tolerance_m):
                 continue
             gap = np.linalg.norm(found - predicted[marker]) if np.all(np.isfinite(predicted[marker])) else 0.0
             agree = views[np.linalg.norm(np.cross(found - origins, directions), axis=1) <= s.agreement_m].tolist()
