@@ -133,22 +133,14 @@ def test_marker_mode_in_the_graph(tmp_path, background, ros_context):
 def offline_fusion(bag, numbers):
     """{stamp [ns]: (15, 3) [m]} of marker_tracker + marker_skeleton run without ROS on `bag`."""
     from mvpose_nodes.camera_bag import frame_sets
-    from mvpose_nodes.marker_views import MarkerViews
-    from mvpose_nodes.markers import MarkerTracker
-    trackers, views, result = {k: MarkerTracker() for k in numbers}, None, {}
+    from mvpose_nodes.marker_views import ViewTrackers
+    fused, result = None, {}
     for frame_set in frame_sets(bag, numbers):
-        if views is None:
-            tracks = [trackers[k].initialise(frame_set.images[k], *frame_set.markers[k]) for k in numbers]
-        else:
-            tracks = [trackers[k].track(frame_set.images[k]) for k in numbers]
-        if views is None:
-            views = MarkerViews([frame_set.cameras[k] for k in numbers])
-            views.start([t[0] for t in tracks], [t[1] for t in tracks])
-        points, positions, flags = views.fuse([t[0] for t in tracks], [t[1] for t in tracks],
-                                              [trackers[k].detections.astype(np.float32) for k in numbers])
-        for c, k in enumerate(numbers):   # (float32: the blobs as MarkerTracks carries them)
-            trackers[k].correct(positions[c], flags[c])
-        result[frame_set.stamp_ns] = points
+        labelling = None
+        if fused is None:
+            fused = ViewTrackers([frame_set.cameras[k] for k in numbers])
+            labelling = [frame_set.markers[k] for k in numbers]
+        result[frame_set.stamp_ns] = fused.track([frame_set.images[k] for k in numbers], labelling)[0]
     return result
 
 

@@ -41,7 +41,7 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment
 
 from mvpose_nodes.markers import FLAG_DETECTED, FLAG_LOST, FLAG_PREDICTED, MARKER_NAMES, REGION_INDICES, \
-    gated_assignment
+    MarkerTracker, gated_assignment
 from mvpose_nodes.triangulation import dlt_point, triangulate
 
 # The region whose motion carries each region marker when it cannot be triangulated: its own region,
@@ -388,6 +388,36 @@ class MarkerViews:
         views = list(views)
         return dlt_point([self.cameras[c] for c in views], np.array([rays[c][2][marker] for c in views]),
                          np.ones(len(views)))
+
+
+class ViewTrackers:
+    """Marker mode's graph without ROS: a markers.MarkerTracker per camera (the marker_tracker nodes) and
+    their tracks fused by MarkerViews (marker_skeleton), the fusion handed back to each tracker before
+    the next frame, as the nodes do. The blobs go to the fusion as float32, as MarkerTracks carries
+    them, so that this computes exactly what the graph does."""
+
+    def __init__(self, cameras, settings=ViewSettings()):
+        self.trackers = [MarkerTracker() for _ in cameras]
+        self.views = MarkerViews(cameras, settings)
+
+    def track(self, images, labelling=None):
+        """One frame: images, C RGB uint8 (H, W, 3) in the cameras' order. The first frame is the labelled
+        calibration frame: labelling, per camera (positions (15, 2) [px], visible (15,) bool); its tracks
+        are the labelling snapped to the detections (markers._TrackerBase.initialise). Returns as
+        MarkerViews.fuse: (points (15, 3) [m], positions (C, 15, 2) [px], flags (C, 15))."""
+        if self.views.points is None:
+            if labelling is None:
+                raise ValueError('the first frame needs its labelling')
+            tracks = [tracker.initialise(image, *label) for tracker, image, label in
+                      zip(self.trackers, images, labelling)]
+            self.views.start([t[0] for t in tracks], [t[1] for t in tracks])
+        else:
+            tracks = [tracker.track(image) for tracker, image in zip(self.trackers, images)]
+        blobs = [tracker.detections.astype(np.float32) for tracker in self.trackers]
+        points, positions, flags = self.views.fuse([t[0] for t in tracks], [t[1] for t in tracks], blobs)
+        for tracker, camera_positions, camera_flags in zip(self.trackers, positions, flags):
+            tracker.correct(camera_positions, camera_flags)
+        return points, positions, flags
 
 
 def _ray_distance(origin, direction, point):

@@ -41,22 +41,21 @@ def markers_main(argv=None, prog='markers'):
 def evaluate_bag(bag, cameras=None, pictures=None):
     from mvpose_nodes.body_model import JOINT_NAMES
     from mvpose_nodes.camera_bag import frame_sets
-    from mvpose_nodes.marker_views import MarkerViews
+    from mvpose_nodes.marker_views import ViewTrackers
     from mvpose_nodes.markers import MarkerTracker, NearestNeighbourTracker
     from mvpose_nodes.progress import Progress
 
-    sets = [s for s in frame_sets(bag, cameras) if getattr(s, 'markers', None)]
+    sets = [s for s in frame_sets(bag, cameras) if s.markers]
     if not sets:
         raise UserError(f"bag '{bag}' has no ground-truth markers (/cam<K>/ground_truth/markers): "
                         "make one with ./mvpose synth --markers")
     numbers = sorted(sets[0].markers)
     sets = [s for s in sets if all(k in s.markers and k in s.images for k in numbers)]
     camera_of = {k: sets[0].cameras[k] for k in numbers}
-    methods = {'nearest neighbour': NearestNeighbourTracker, 'regions (paper 001)': MarkerTracker,
-               FUSED: MarkerTracker}
+    methods = {'nearest neighbour': NearestNeighbourTracker, 'regions (paper 001)': MarkerTracker}
     trackers = {method: {k: make() for k in numbers} for method, make in methods.items()}
-    views = MarkerViews([camera_of[k] for k in numbers])
-    results = {method: {k: [] for k in numbers} for method in methods}
+    fused = ViewTrackers([camera_of[k] for k in numbers])
+    results = {method: {k: [] for k in numbers} for method in [*methods, FUSED]}
     fused_3d, truth_3d = [], []
     progress = Progress(len(sets), 'markers eval')
     for index, frame_set in enumerate(sets):
@@ -69,16 +68,10 @@ def evaluate_bag(bag, cameras=None, pictures=None):
                 image = frame_set.images[k]
                 # The labelled first frame's tracks are its labelling snapped to the detections.
                 tracks[method, k] = tracker.initialise(image, *truth[k]) if index == 0 else tracker.track(image)
-        # As marker_skeleton does: started from the first frame's tracks, then every frame fused.
-        own = [tracks[FUSED, k] for k in numbers]
-        if index == 0:
-            views.start([t[0] for t in own], [t[1] for t in own])
-        points, positions, flags = views.fuse([t[0] for t in own], [t[1] for t in own],
-                                              # float32: the blobs as MarkerTracks carries them
-                                              [trackers[FUSED][k].detections.astype(np.float32) for k in numbers])
+        points, positions, flags = fused.track([frame_set.images[k] for k in numbers],
+                                               [truth[k] for k in numbers] if index == 0 else None)
         fused_3d.append(points)
         for c, k in enumerate(numbers):
-            trackers[FUSED][k].correct(positions[c], flags[c])
             tracks[FUSED, k] = (positions[c], flags[c])
         for (method, k), (estimate, estimate_flags) in tracks.items():
             results[method][k].append((estimate, estimate_flags, *truth[k]))

@@ -343,6 +343,23 @@ def draw_legend(tile, fitted, truth):
         x += 20 + cv2.getTextSize(label, FONT, 0.5, 1)[0][0]
 
 
+def tile_sheet(tiles, columns, tile_width, title=None, title_scale=0.8, footer=0):
+    """The tiles (RGB, tile_width wide, any height) in rows of `columns`, each row as tall as the tallest
+    tile, under a 40 px title band when `title`, over `footer` px left black; black where no tile."""
+    columns = max(1, min(columns, len(tiles)))
+    rows = math.ceil(len(tiles) / columns)
+    tile_height = max(t.shape[0] for t in tiles)
+    band = 40 if title else 0
+    sheet = np.zeros((band + rows * tile_height + footer, columns * tile_width, 3), np.uint8)
+    if title:
+        put_text(sheet, title, (12, 28), title_scale, thickness=2)
+    for i, tile in enumerate(tiles):
+        r, c = divmod(i, columns)
+        top = band + r * tile_height
+        sheet[top:top + tile.shape[0], c * tile_width:(c + 1) * tile_width] = tile
+    return sheet
+
+
 def contact_sheet(images, cameras, fitted_joints, truth_joints, path, columns=4, tile_width=480,
                   used_cameras=None, title=None):
     """Paper 000's Fig. 10 as a PNG: one tile per camera, the skeletons projected with that camera.
@@ -375,17 +392,7 @@ def contact_sheet(images, cameras, fitted_joints, truth_joints, path, columns=4,
                      colour=COLOURS['centre'])
         draw_legend(tile, fitted_joints is not None, truth_joints is not None)
         tiles.append(tile)
-    columns = max(1, min(columns, len(tiles)))
-    rows = math.ceil(len(tiles) / columns)
-    tile_height = max(t.shape[0] for t in tiles)
-    band = 40 if title else 0
-    sheet = np.zeros((band + rows * tile_height, columns * tile_width, 3), np.uint8)
-    if title:
-        put_text(sheet, title, (12, 28), 0.8, thickness=2)
-    for i, tile in enumerate(tiles):
-        r, c = divmod(i, columns)
-        sheet[band + r * tile_height:band + r * tile_height + tile.shape[0], c * tile_width:(c + 1) * tile_width] = tile
-    return write_png(path, sheet)
+    return write_png(path, tile_sheet(tiles, columns, tile_width, title))
 
 
 # ---------------------------------------------------------------- marker mode
@@ -436,16 +443,7 @@ def marker_sheet(images, tracks, truth, path, columns=3, tile_width=560, title=N
         tiles.append(tile)
     if not tiles:
         raise ValueError('marker_sheet needs at least one camera image')
-    columns = max(1, min(columns, len(tiles)))
-    rows = math.ceil(len(tiles) / columns)
-    tile_height = max(t.shape[0] for t in tiles)
-    band, legend = (40 if title else 0), 34
-    sheet = np.zeros((band + rows * tile_height + legend, columns * tile_width, 3), np.uint8)
-    if title:
-        put_text(sheet, title, (12, 28), 0.7, thickness=2)
-    for i, tile in enumerate(tiles):
-        r, c = divmod(i, columns)
-        sheet[band + r * tile_height:band + r * tile_height + tile.shape[0], c * tile_width:(c + 1) * tile_width] = tile
+    sheet = tile_sheet(tiles, columns, tile_width, title, title_scale=0.7, footer=34)
     y, x = sheet.shape[0] - 12, 12
     for label, colour in zip(('detected', 'predicted (hidden)', 'lost'), MARKER_FLAG_COLOURS):
         cv2.circle(sheet, (x + 6, y - 5), 5, colour, -1, cv2.LINE_AA)
