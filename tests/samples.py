@@ -1,7 +1,7 @@
 """Messages with seeded random content, for tests that check values survive a trip."""
 import numpy as np
 
-from mvpose_nodes.body_model import JOINT_NAMES, PARAMETER_NAMES, STAGE_NAMES
+from mvpose_nodes.body.model import JOINT_NAMES, PARAMETER_NAMES, STAGE_NAMES
 
 
 def sample_skeleton(seed, stamp_ns=1_700_000_000_000_000_000):

@@ -12,8 +12,8 @@ from rosgraph_msgs.msg import Clock
 from samples import sample_skeleton
 from sensor_msgs.msg import CameraInfo
 
-from mvpose_nodes.bagfile import BagReader
-from mvpose_nodes.msgdict import set_message_fields
+from mvpose_nodes.io.bagfile import BagReader
+from mvpose_nodes.io.msgdict import set_message_fields
 
 SKELETON_TOPIC = '/test/skeleton'
 CAMERA_INFO_TOPIC = '/cam3/camera_info'

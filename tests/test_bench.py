@@ -6,7 +6,7 @@ import re
 import pytest
 
 from conftest import assert_one_line_error, run_mvpose
-from mvpose_nodes import bench
+from mvpose_nodes.app import bench
 
 
 def test_median_and_p95_interpolate_like_numpy():
@@ -89,7 +89,7 @@ def test_bad_input_is_one_line(tmp_path):
     assert_one_line_error(run_mvpose('bench', tmp_path / 'nothing', check=False), 'not found')
     from rclpy.serialization import serialize_message
     from sensor_msgs.msg import CameraInfo
-    from mvpose_nodes.bagfile import BagWriter
+    from mvpose_nodes.io.bagfile import BagWriter
     with BagWriter(tmp_path / 'cam3_only') as out:
         out.add_topic('/cam3/camera_info', 'sensor_msgs/msg/CameraInfo')
         out.write('/cam3/camera_info', serialize_message(CameraInfo()), 1)

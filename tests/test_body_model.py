@@ -3,18 +3,18 @@ import numpy as np
 import pytest
 from mvpose_msgs.msg import LabelledContour
 
-from mvpose_nodes import body_model
-from mvpose_nodes.geometry import matrix_from_quaternion, quaternion_from_matrix, rotation_about, rotation_between
+from mvpose_nodes.body import model
+from mvpose_nodes.body.geometry import matrix_from_quaternion, quaternion_from_matrix, rotation_about, rotation_between
 
 
 def test_model_sizes_follow_paper_table_1():
-    assert len(body_model.JOINT_NAMES) == 15 and len(body_model.BONES) == 14
-    assert len(body_model.PARAMETER_NAMES) == 29 and len(set(body_model.PARAMETER_NAMES)) == 29
-    assert {j for bone in body_model.BONES for j in bone} == set(body_model.JOINT_NAMES)
+    assert len(model.JOINT_NAMES) == 15 and len(model.BONES) == 14
+    assert len(model.PARAMETER_NAMES) == 29 and len(set(model.PARAMETER_NAMES)) == 29
+    assert {j for bone in model.BONES for j in bone} == set(model.JOINT_NAMES)
 
 
 def test_part_labels_equal_the_message_constants():
-    for name, value in body_model.PART_LABELS.items():
+    for name, value in model.PART_LABELS.items():
         assert getattr(LabelledContour, f'LABEL_{name.upper()}') == value
 
 
@@ -49,15 +49,15 @@ def rest_pose():
 
 
 def test_joint_frames_of_the_rest_pose_are_the_torso_frame():
-    assert np.allclose(body_model.joint_orientations(rest_pose()), [0, 0, 0, 1], atol=1e-12)
+    assert np.allclose(model.joint_orientations(rest_pose()), [0, 0, 0, 1], atol=1e-12)
 
 
 def test_joint_frames_follow_a_raised_arm_and_a_turned_body():
     joints = rest_pose()
-    shoulder, elbow, wrist = (body_model.JOINT_NAMES.index(n) for n in ('left_shoulder', 'left_elbow', 'left_wrist'))
+    shoulder, elbow, wrist = (model.JOINT_NAMES.index(n) for n in ('left_shoulder', 'left_elbow', 'left_wrist'))
     joints[[elbow, wrist]] = joints[shoulder] + np.array([[0.28, 0, 0], [0.53, 0, 0]])  # arm straight forward
     turn = rotation_about([0, 0, 1], 0.7)
-    frames = body_model.joint_orientations(joints @ turn.T)
+    frames = model.joint_orientations(joints @ turn.T)
     expected_arm = turn @ rotation_about([0, 1, 0], -np.pi / 2)  # hanging (−z) to forward (+x): about −y
     assert np.allclose(matrix_from_quaternion(frames[shoulder]), expected_arm, atol=1e-9)
     assert np.allclose(matrix_from_quaternion(frames[0]), turn, atol=1e-12)

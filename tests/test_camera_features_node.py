@@ -10,8 +10,8 @@ from mvpose_msgs.msg import LabelledContour, SkinEllipseArray
 from rclpy.qos import DurabilityPolicy, QoSProfile
 from sensor_msgs.msg import CameraInfo, Image
 
-from mvpose_nodes.camera_bag import frame_stamp_ns
-from mvpose_nodes.rosconv import stamp_ns
+from mvpose_nodes.ros.camera_bag import frame_stamp_ns
+from mvpose_nodes.ros.conversions import stamp_ns
 
 FRAMES = (60, 62)
 OUTPUTS = {'silhouette': Image, 'skin_ellipses': SkinEllipseArray, 'labelled_contour': LabelledContour}

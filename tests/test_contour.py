@@ -7,9 +7,9 @@ import cv2
 import numpy as np
 import pytest
 
-from mvpose_nodes.body_model import (LABEL_HEAD, LABEL_LEFT_HAND, LABEL_LEFT_LEG, LABEL_NONE, LABEL_RIGHT_HAND,
+from mvpose_nodes.body.model import (LABEL_HEAD, LABEL_LEFT_HAND, LABEL_LEFT_LEG, LABEL_NONE, LABEL_RIGHT_HAND,
                                      LABEL_RIGHT_LEG, LABEL_TORSO)
-from mvpose_nodes.contour import (SIDE_A, SIDE_B, SIDE_NONE, contour_graph, label_contour, outer_contour,
+from mvpose_nodes.vision.contour import (SIDE_A, SIDE_B, SIDE_NONE, contour_graph, label_contour, outer_contour,
                                   shortest_path)
 
 ROWS, COLS = 1080, 1920

@@ -10,7 +10,7 @@ from conftest import assert_one_line_error, run_mvpose
 from mvpose_msgs.msg import Skeleton
 from samples import sample_skeleton
 
-from mvpose_nodes.msgdict import message_to_yaml, set_message_fields
+from mvpose_nodes.io.msgdict import message_to_yaml, set_message_fields
 
 TOPIC = '/test/dds_skeleton'
 

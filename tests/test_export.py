@@ -11,12 +11,12 @@ from conftest import assert_one_line_error, run_mvpose
 from rclpy.serialization import serialize_message
 
 from mvpose_msgs.msg import Skeleton
-from mvpose_nodes.bagfile import BagWriter
-from mvpose_nodes.body_model import BONES, JOINT_NAMES, PARAMETER_NAMES
-from mvpose_nodes.kinematics import J, P, bone_lengths, euler_matrix, forward_kinematics
-from mvpose_nodes.mocap import BVH_TO_WORLD, cmu_clip, elementary_rotations, load_bvh, retarget
-from mvpose_nodes.motion_export import (STATUS_NAMES, Motion, read_bvh, write_csv, write_json, write_motion)
-from mvpose_nodes.rosconv import skeleton_message
+from mvpose_nodes.io.bagfile import BagWriter
+from mvpose_nodes.body.model import BONES, JOINT_NAMES, PARAMETER_NAMES
+from mvpose_nodes.body.kinematics import J, P, bone_lengths, euler_matrix, forward_kinematics
+from mvpose_nodes.studio.mocap import BVH_TO_WORLD, cmu_clip, elementary_rotations, load_bvh, retarget
+from mvpose_nodes.io.motion_export import (STATUS_NAMES, Motion, read_bvh, write_csv, write_json, write_motion)
+from mvpose_nodes.ros.conversions import skeleton_message
 
 EPOCH_NS = 1_230_768_000_000_000_000  # 2009-01-01, the synthetic bags' epoch
 FRAME_NS = 40_000_000                 # 25 fps

@@ -7,14 +7,14 @@ import numpy as np
 import pytest
 from conftest import assert_one_line_error, run_mvpose
 
-from mvpose_nodes.body_model import JOINT_NAMES
-from mvpose_nodes.camera import studio_rig
-from mvpose_nodes.camera_features_config import PARAMETERS, load_settings
-from mvpose_nodes.errors import UserError
-from mvpose_nodes.features import FeatureExtractor, FeatureSettings, ellipse_of
-from mvpose_nodes.silhouette import BackgroundModel, chroma_key_foreground, clean_mask, silhouette_keypoints
-from mvpose_nodes.skin import SkinModel
-from mvpose_nodes.skin_cli import default_model_path
+from mvpose_nodes.body.model import JOINT_NAMES
+from mvpose_nodes.body.camera import studio_rig
+from mvpose_nodes.ros.params import PARAMETERS, load_settings
+from mvpose_nodes.tools.cli import UserError
+from mvpose_nodes.vision.features import FeatureExtractor, FeatureSettings, ellipse_of
+from mvpose_nodes.vision.silhouette import BackgroundModel, chroma_key_foreground, clean_mask, silhouette_keypoints
+from mvpose_nodes.vision.skin import SkinModel
+from mvpose_nodes.app.skin import default_model_path
 
 BLUE = (60, 100, 200)
 
@@ -107,17 +107,17 @@ def test_direct_ellipse_fit_recovers_a_known_ellipse(angle):
 @pytest.fixture(scope='module')
 def studio_frame():
     """One 960×540 view of the synthetic studio with its ground truth, rendered here."""
-    from mvpose_nodes import studio
-    from mvpose_nodes.mocap import cmu_clip, load_bvh, retarget
+    from mvpose_nodes.studio import scene
+    from mvpose_nodes.studio.mocap import cmu_clip, load_bvh, retarget
     motion = retarget(load_bvh(cmu_clip('07_01'))).placed(heading=math.radians(45))
     i = len(motion.joints) // 2
-    pose = studio.BodyPose(motion.joints[i], motion.toes[i], motion.hand_tips[i], motion.head_forward[i])
+    pose = scene.BodyPose(motion.joints[i], motion.toes[i], motion.hand_tips[i], motion.head_forward[i])
     camera = studio_rig((960, 540), cameras=[3])[0]
-    view = studio.prepare_camera(camera)
-    rendering = studio.render(view, pose, studio.Appearance(), studio.shadow_map(
-        studio.body_primitives(pose, studio.Appearance()), pose.joints[0, :2]), pose.joints[0, :2])
-    rgb, labels = studio.Realism().finish(rendering, view, 3, 0, 0)
-    empty, _ = studio.Realism().finish(studio.Rendering(view.background, np.zeros_like(labels)), view, 3, 0, 0)
+    view = scene.prepare_camera(camera)
+    rendering = scene.render(view, pose, scene.Appearance(), scene.shadow_map(
+        scene.body_primitives(pose, scene.Appearance()), pose.joints[0, :2]), pose.joints[0, :2])
+    rgb, labels = scene.Realism().finish(rendering, view, 3, 0, 0)
+    empty, _ = scene.Realism().finish(scene.Rendering(view.background, np.zeros_like(labels)), view, 3, 0, 0)
     return rgb, labels, camera, pose, empty
 
 
@@ -126,7 +126,7 @@ def extractor(settings=FeatureSettings(), background=None):
 
 
 def check_against_truth(features, labels, camera, pose, min_iou=0.95):
-    from mvpose_nodes.studio import SKIN_BIT
+    from mvpose_nodes.studio.scene import SKIN_BIT
     truth_person = (labels & ~np.uint8(SKIN_BIT)) > 0
     iou = (features.silhouette & truth_person).sum() / (features.silhouette | truth_person).sum()
     assert iou > min_iou

@@ -6,12 +6,12 @@ import yaml
 from conftest import run_mvpose
 from rclpy.serialization import serialize_message
 
-from mvpose_nodes.bagfile import BagWriter
-from mvpose_nodes.body_model import JOINT_NAMES
-from mvpose_nodes.camera import studio_rig
-from mvpose_nodes.fitter import KEYPOINT_JOINT, SkeletonFitter, View
-from mvpose_nodes.mocap import cmu_clip, load_bvh, retarget
-from mvpose_nodes.rosconv import skeleton_message
+from mvpose_nodes.io.bagfile import BagWriter
+from mvpose_nodes.body.model import JOINT_NAMES
+from mvpose_nodes.body.camera import studio_rig
+from mvpose_nodes.fitting.fitter import KEYPOINT_JOINT, SkeletonFitter, View
+from mvpose_nodes.studio.mocap import cmu_clip, load_bvh, retarget
+from mvpose_nodes.ros.conversions import skeleton_message
 
 KEYPOINTS = ('root', 'neck', 'head', 'left_wrist', 'right_wrist', 'left_elbow', 'right_elbow', 'left_ankle',
              'right_ankle', 'left_knee', 'right_knee')
@@ -124,8 +124,8 @@ def test_time_jump_or_reversal_reinitialises_and_missing_evidence_keeps_a_limb()
     fit = fitter.fit(3.04, exact_views(cameras, motion.joints[4], without_left_arm))
     left_arm = next(s for s in fit.stages if s.name == 'left_arm')
     assert not left_arm.fitted and left_arm.evaluations == 0
-    from mvpose_nodes.fitter import STAGE_PARAMETERS
-    from mvpose_nodes.kinematics import P
+    from mvpose_nodes.fitting.fitter import STAGE_PARAMETERS
+    from mvpose_nodes.body.kinematics import P
     indices = [P[n] for n in STAGE_PARAMETERS['left_arm']]
     assert np.array_equal(fit.parameters[indices], before[indices]), 'the left arm keeps its angles'
 
@@ -152,7 +152,7 @@ def walk_found(motion, frame, rng, swap):
 def test_limb_tracks_correct_a_wrong_start_and_keep_the_sides_through_a_walk():
     """Started the wrong way round (no face seen), the pairs are put right once the person is seen
     walking (within 0.2 s) and then stay right through the strides, whatever the triangulation's order."""
-    from mvpose_nodes.fitter import LimbTracks
+    from mvpose_nodes.fitting.fitter import LimbTracks
     motion = retarget(load_bvh(cmu_clip('07_01'))).placed()
     rng = np.random.default_rng(3)
     tracks = LimbTracks()

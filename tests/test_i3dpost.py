@@ -1,11 +1,11 @@
-"""mvpose_nodes.i3dpost: the i3DPost layout (calibration text file, camera folders of PNG frames)
+"""mvpose_nodes.studio.i3dpost: the i3DPost layout (calibration text file, camera folders of PNG frames)
 written and read back, and the user errors of bad files."""
 import numpy as np
 import pytest
 
-from mvpose_nodes.camera import studio_rig
-from mvpose_nodes.errors import UserError
-from mvpose_nodes.i3dpost import (available, find_sequence, frame_path, parse_frame_range, read_calibration,
+from mvpose_nodes.body.camera import studio_rig
+from mvpose_nodes.tools.cli import UserError
+from mvpose_nodes.studio.i3dpost import (available, find_sequence, frame_path, parse_frame_range, read_calibration,
                                   read_frame, write_calibration, write_frame)
 
 

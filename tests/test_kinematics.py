@@ -3,9 +3,9 @@ method (and the older constrained method shown worse)."""
 import numpy as np
 import pytest
 
-from mvpose_nodes.body_model import PARAMETER_NAMES
-from mvpose_nodes.geometry import quaternion_from_matrix, rotation_between
-from mvpose_nodes.kinematics import (BONES, J, P, bone_lengths, constrained_euler, euler_from_quaternion,
+from mvpose_nodes.body.model import PARAMETER_NAMES
+from mvpose_nodes.body.geometry import quaternion_from_matrix, rotation_between
+from mvpose_nodes.body.kinematics import (BONES, J, P, bone_lengths, constrained_euler, euler_from_quaternion,
                                      euler_matrix, forward_kinematics, inverse_kinematics)
 
 LENGTHS = bone_lengths(1.75)

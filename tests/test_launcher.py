@@ -13,7 +13,7 @@ import time
 
 import pytest
 
-from mvpose_nodes.launcher import Launch, main, process_specs
+from mvpose_nodes.tools.launch import Launch, main, process_specs
 
 # A stand-in process: prints 'ready' once its signal handling is in place, then exits or waits.
 CHILD = '''
@@ -61,7 +61,7 @@ def write_launch_file(tmp_path, text):
 
 
 def start_launcher(path, *options):
-    launcher = subprocess.Popen([sys.executable, '-m', 'mvpose_nodes.launcher', str(path), *options],
+    launcher = subprocess.Popen([sys.executable, '-m', 'mvpose_nodes.tools.launch', str(path), *options],
                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     watchdog = threading.Timer(20, launcher.kill)  # a hanging launcher fails the test instead of blocking it
     watchdog.daemon = True

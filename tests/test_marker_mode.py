@@ -3,12 +3,12 @@ MarkerTracks conversion, and the evaluation's identity-swap count."""
 import numpy as np
 import pytest
 
-from mvpose_nodes.body_model import JOINT_NAMES
-from mvpose_nodes.camera import studio_rig
-from mvpose_nodes.marker_triangulation import triangulate_markers
-from mvpose_nodes.markers import FLAG_DETECTED, FLAG_LOST, FLAG_PREDICTED
-from mvpose_nodes.markers_cli import errors_and_swaps, swap_events
-from mvpose_nodes.mocap import cmu_clip, load_bvh, retarget
+from mvpose_nodes.body.model import JOINT_NAMES
+from mvpose_nodes.body.camera import studio_rig
+from mvpose_nodes.markers.triangulation import triangulate_markers
+from mvpose_nodes.markers.tracking import FLAG_DETECTED, FLAG_LOST, FLAG_PREDICTED
+from mvpose_nodes.app.markers import errors_and_swaps, swap_events
+from mvpose_nodes.studio.mocap import cmu_clip, load_bvh, retarget
 
 
 @pytest.fixture(scope='module')
@@ -52,7 +52,7 @@ def test_a_marker_seen_in_one_camera_keeps_its_previous_position(pose):
 
 def test_marker_tracks_message_round_trip_and_bad_messages():
     from std_msgs.msg import Header
-    from mvpose_nodes.rosconv import marker_tracks, tracks_from_message
+    from mvpose_nodes.ros.conversions import marker_tracks, tracks_from_message
     rng = np.random.default_rng(0)
     positions, flags = rng.uniform(0, 1000, (15, 2)), rng.integers(0, 2, 15)
     message = marker_tracks(Header(), positions, flags)
@@ -87,7 +87,7 @@ def test_marker_mode_in_the_graph(tmp_path, background, ros_context):
     import yaml
     from conftest import run_mvpose
     from test_fitting import wait_for_graph
-    from mvpose_nodes.camera_bag import frame_sets
+    from mvpose_nodes.ros.camera_bag import frame_sets
     bag = tmp_path / 'markers'
     run_mvpose('synth', '--markers', '--cameras', 3, 5, 7, '--frames', '60-64', '--resolution', '960x540', '-o', bag,
                timeout=300)
@@ -132,8 +132,8 @@ def test_marker_mode_in_the_graph(tmp_path, background, ros_context):
 
 def offline_fusion(bag, numbers):
     """{stamp [ns]: (15, 3) [m]} of marker_tracker + marker_skeleton run without ROS on `bag`."""
-    from mvpose_nodes.camera_bag import frame_sets
-    from mvpose_nodes.marker_views import ViewTrackers
+    from mvpose_nodes.ros.camera_bag import frame_sets
+    from mvpose_nodes.markers.views import ViewTrackers
     fused, result = None, {}
     for frame_set in frame_sets(bag, numbers):
         labelling = None
@@ -179,10 +179,10 @@ def test_a_bag_whose_markers_do_not_decode_is_refused_in_one_line(tmp_path):
     MarkerTracks without blobs reads) gives a one-line error naming the bag and topic, not a traceback."""
     from rclpy.serialization import serialize_message
     from std_msgs.msg import Header
-    from mvpose_nodes.bagfile import BagWriter
-    from mvpose_nodes.camera_bag import frame_sets
-    from mvpose_nodes.errors import UserError
-    from mvpose_nodes.rosconv import marker_tracks
+    from mvpose_nodes.io.bagfile import BagWriter
+    from mvpose_nodes.ros.camera_bag import frame_sets
+    from mvpose_nodes.tools.cli import UserError
+    from mvpose_nodes.ros.conversions import marker_tracks
     data = serialize_message(marker_tracks(Header(), np.zeros((15, 2)), [FLAG_DETECTED] * 15, blobs=[[1.0, 2.0]]))
     with BagWriter(tmp_path / 'old') as bag:
         bag.add_topic('/cam3/ground_truth/markers', 'mvpose_msgs/msg/MarkerTracks')

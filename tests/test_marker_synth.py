@@ -7,14 +7,14 @@ from conftest import assert_one_line_error, run_mvpose
 from rclpy.serialization import deserialize_message
 from rosbags.highlevel import AnyReader
 
-from mvpose_nodes import studio
-from mvpose_nodes.bagfile import BagReader
-from mvpose_nodes.body_model import JOINT_NAMES
-from mvpose_nodes.camera import studio_rig
-from mvpose_nodes.camera_bag import MARKER_CENTRES_TOPIC, camera_topics, frame_sets
-from mvpose_nodes.interfaces import message_class
-from mvpose_nodes.scripted_motion import occlusion_motion, phase_frames
-from mvpose_nodes.synth_cli import make_motion
+from mvpose_nodes.studio import scene
+from mvpose_nodes.io.bagfile import BagReader
+from mvpose_nodes.body.model import JOINT_NAMES
+from mvpose_nodes.body.camera import studio_rig
+from mvpose_nodes.ros.camera_bag import MARKER_CENTRES_TOPIC, camera_topics, frame_sets
+from mvpose_nodes.io.interfaces import message_class
+from mvpose_nodes.studio.scripted_motion import occlusion_motion, phase_frames
+from mvpose_nodes.app.synth import make_motion
 from types import SimpleNamespace
 
 J = {name: i for i, name in enumerate(JOINT_NAMES)}
@@ -22,7 +22,7 @@ CAMERAS = (3, 5, 7)
 
 
 def pose_at(motion, index):
-    return studio.BodyPose(motion.joints[index], motion.toes[index], motion.hand_tips[index],
+    return scene.BodyPose(motion.joints[index], motion.toes[index], motion.hand_tips[index],
                            motion.head_forward[index])
 
 
@@ -33,9 +33,9 @@ def red(image):
 
 
 def finished(camera, pose, appearance):
-    view = studio.prepare_camera(camera, texture_seed=camera.number)
-    rendering = studio.render(view, pose, appearance)
-    rgb, labels = studio.Realism().finish(rendering, view, camera.number, 0, 0)
+    view = scene.prepare_camera(camera, texture_seed=camera.number)
+    rendering = scene.render(view, pose, appearance)
+    rgb, labels = scene.Realism().finish(rendering, view, camera.number, 0, 0)
     return rgb, labels, rendering.marker_ids
 
 
@@ -43,10 +43,10 @@ def finished(camera, pose, appearance):
 def test_red_shows_exactly_at_the_visible_markers(skin_tone):
     walk = make_motion(SimpleNamespace(frames='52-61', clip='07_01', motion='walk', height=1.75, seed=0))
     pose = pose_at(walk, 3)
-    appearance = studio.Appearance(skin=studio.SKIN_TONES[skin_tone], shirt=studio.SHIRTS['green'], markers=True)
+    appearance = scene.Appearance(skin=scene.SKIN_TONES[skin_tone], shirt=scene.SHIRTS['green'], markers=True)
     for camera in studio_rig((960, 540), cameras=CAMERAS):
         rgb, labels, marker_ids = finished(camera, pose, appearance)
-        pixels, fractions, visible = studio.marker_visibility(camera, pose, appearance)
+        pixels, fractions, visible = scene.marker_visibility(camera, pose, appearance)
         reddish = red(rgb)
         assert visible.sum() >= 6, f'camera {camera.number}: only {visible.sum()} markers visible'
         for name, (x, y), seen, fraction in zip(JOINT_NAMES, pixels, visible, fractions):
@@ -67,7 +67,7 @@ def test_the_red_test_sees_a_red_shirt():
     """The colour rule above is not blind: the walk's usual red shirt trips it."""
     walk = make_motion(SimpleNamespace(frames='52-61', clip='07_01', motion='walk', height=1.75, seed=0))
     camera = studio_rig((960, 540), cameras=[5])[0]
-    rgb, labels, _ = finished(camera, pose_at(walk, 3), studio.Appearance(shirt=studio.SHIRTS['red']))
+    rgb, labels, _ = finished(camera, pose_at(walk, 3), scene.Appearance(shirt=scene.SHIRTS['red']))
     assert (red(rgb) & (labels > 0)).sum() > 200
 
 
@@ -76,16 +76,16 @@ def test_marker_behind_the_body_is_hidden():
     camera 5 and are hidden from camera 1 behind the person; the left hip's (on the left side, world −y)
     is seen by camera 7 and hidden from camera 3 on the right."""
     pose = pose_at(occlusion_motion(), 0)
-    appearance = studio.Appearance(markers=True)
+    appearance = scene.Appearance(markers=True)
     rig = {camera.number: camera for camera in studio_rig((960, 540))}
-    seen = {k: studio.marker_visibility(rig[k], pose, appearance)[2] for k in (1, 3, 5, 7)}
+    seen = {k: scene.marker_visibility(rig[k], pose, appearance)[2] for k in (1, 3, 5, 7)}
     for name in ('pelvis', 'neck'):
         assert seen[5][J[name]] and not seen[1][J[name]], name
     assert seen[7][J['left_hip']] and not seen[3][J['left_hip']]
     assert seen[3][J['right_hip']] and not seen[7][J['right_hip']]
     assert seen[1][J['head']] and seen[5][J['head']], 'the vertex is seen from all round'
     # Marker centres sit on the body's surface, a few centimetres from the joints.
-    offsets = np.linalg.norm(studio.marker_centres(pose, appearance) - pose.joints, axis=1)
+    offsets = np.linalg.norm(scene.marker_centres(pose, appearance) - pose.joints, axis=1)
     assert offsets[J['head']] < 0.02 and np.all(offsets < 0.13) and np.all(offsets[np.arange(15) != J['head']] > 0.03)
 
 
@@ -94,13 +94,13 @@ def test_occlusion_script_hides_the_head_behind_the_hand():
     phases = {name: (first, last) for name, first, last in phase_frames()}
     assert len(motion.joints) == max(last for _, _, last in phase_frames()) + 1
     camera = studio_rig((960, 540), cameras=[5])[0]
-    appearance = studio.Appearance(markers=True)
+    appearance = scene.Appearance(markers=True)
     first, last = phases['hand_in_front_of_head']
     hidden = [f for f in range(first, last + 1)
-              if not studio.marker_visibility(camera, pose_at(motion, f), appearance)[2][J['head']]]
+              if not scene.marker_visibility(camera, pose_at(motion, f), appearance)[2][J['head']]]
     assert len(hidden) >= 3
     first, last = phases['knees_crossing']
-    assert any(not studio.marker_visibility(camera, pose_at(motion, f), appearance)[2][J['left_knee']]
+    assert any(not scene.marker_visibility(camera, pose_at(motion, f), appearance)[2][J['left_knee']]
                for f in range(first, last + 1, 3))
     # Smooth: no joint moves more than 10 cm between frames (2.5 m/s); the feet stay on or above the floor.
     assert np.abs(np.diff(motion.joints, axis=0)).max() < 0.10

@@ -4,10 +4,10 @@ carried by its parent, and a lost marker found again from blobs nobody claimed."
 import numpy as np
 import pytest
 
-from mvpose_nodes.camera import studio_rig
-from mvpose_nodes.marker_views import LIMB_PARENT, MarkerViews
-from mvpose_nodes.markers import FLAG_DETECTED, FLAG_PREDICTED, MARKER_NAMES
-from mvpose_nodes.mocap import cmu_clip, load_bvh, retarget
+from mvpose_nodes.body.camera import studio_rig
+from mvpose_nodes.markers.views import LIMB_PARENT, MarkerViews
+from mvpose_nodes.markers.tracking import FLAG_DETECTED, FLAG_PREDICTED, MARKER_NAMES
+from mvpose_nodes.studio.mocap import cmu_clip, load_bvh, retarget
 
 WRIST, OTHER_WRIST = MARKER_NAMES.index('left_wrist'), MARKER_NAMES.index('right_wrist')
 HEAD = MARKER_NAMES.index('head')

@@ -1,4 +1,4 @@
-"""Paper 001's colour-marker tracking constrained by body regions (mvpose_nodes.markers), on seeded
+"""Paper 001's colour-marker tracking constrained by body regions (mvpose_nodes.markers.tracking), on seeded
 synthetic images drawn here: a blue studio background, a textured grey body (head ellipse, torso
 rectangle, arm and leg strokes) pasted at integer offsets, red anti-aliased discs for the markers
 and orange/pink/skin-coloured discs that are not markers."""
@@ -6,7 +6,7 @@ import cv2
 import numpy as np
 import pytest
 
-from mvpose_nodes.markers import (FLAG_DETECTED, FLAG_LOST, FLAG_PREDICTED, MARKER_NAMES, REGIONS, MarkerSettings,
+from mvpose_nodes.markers.tracking import (FLAG_DETECTED, FLAG_LOST, FLAG_PREDICTED, MARKER_NAMES, REGIONS, MarkerSettings,
                                   MarkerTracker, NearestNeighbourTracker, RegionTracker, assign_group, assign_head,
                                   detect_markers, similarity_complete)
 
@@ -386,7 +386,7 @@ def test_region_motion_is_checked_against_its_markers():
     tracker = MarkerTracker()
     rng = np.random.default_rng(4)
     tracker.positions = rng.uniform(100, 300, (15, 2))
-    from mvpose_nodes.markers import REGION_INDICES
+    from mvpose_nodes.markers.tracking import REGION_INDICES
     hips = list(REGION_INDICES['hips'])
     tracker.box_sizes = {'hips': np.array([1.0, 1.0])}
     tracker.trackers = {'hips': SimpleNamespace(size=np.array([60.0, 40.0]))}   # gate (60 + 40) / 4 = 25 px

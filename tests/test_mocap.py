@@ -4,9 +4,9 @@ import functools
 import numpy as np
 import pytest
 
-from mvpose_nodes import mocap
-from mvpose_nodes.body_model import JOINT_NAMES
-from mvpose_nodes.errors import UserError
+from mvpose_nodes.studio.scene import mocap
+from mvpose_nodes.body.model import JOINT_NAMES
+from mvpose_nodes.tools.cli import UserError
 
 CLIP_FRAMES = {'07_01': 317, '07_02': 330, '08_08': 284}
 # 08_08 is a fast walk (2.2 m/s at 1.75 m) on a capture floor that rises by about 8 cm over the clip, so

@@ -1,4 +1,4 @@
-"""mvpose_nodes.msgdict: messages to dict / YAML / CSV as `ros2 topic echo` prints them, and back."""
+"""mvpose_nodes.io.msgdict: messages to dict / YAML / CSV as `ros2 topic echo` prints them, and back."""
 import importlib
 import random
 
@@ -13,7 +13,7 @@ from std_msgs.msg import ByteMultiArray, Header
 from visualization_msgs.msg import MarkerArray
 
 from mvpose_msgs.msg import FitStage, LabelledContour, Skeleton, SkinEllipseArray
-from mvpose_nodes.msgdict import (FieldError, get_message_field, message_to_csv,
+from mvpose_nodes.io.msgdict import (FieldError, get_message_field, message_to_csv,
                                   message_to_ordereddict, message_to_yaml, message_type_name,
                                   set_message_fields)
 

@@ -8,11 +8,11 @@ best_assignment 65 ms for 8 views (128 combinations) (development machine).
 import numpy as np
 import pytest
 
-from mvpose_nodes.body_model import LABEL_LEFT_ARM, LABEL_TORSO
-from mvpose_nodes.camera import studio_rig
-from mvpose_nodes.contour import SIDE_A, SIDE_B, SIDE_NONE, ContourLabels
-from mvpose_nodes.objective import SEGMENT_POINTS, boundary_distances, limb_cost, limb_cost_brute_force
-from mvpose_nodes.triangulation import best_assignment, triangulate
+from mvpose_nodes.body.model import LABEL_LEFT_ARM, LABEL_TORSO
+from mvpose_nodes.body.camera import studio_rig
+from mvpose_nodes.vision.contour import SIDE_A, SIDE_B, SIDE_NONE, ContourLabels
+from mvpose_nodes.fitting.objective import SEGMENT_POINTS, boundary_distances, limb_cost, limb_cost_brute_force
+from mvpose_nodes.body.triangulation import best_assignment, triangulate
 
 IMAGE_SIZE = (640, 480)
 ARM_SIDES_X = (100, 140)  # a vertical arm 40 px wide: SIDE_A at x = 100, SIDE_B at x = 140
@@ -170,22 +170,22 @@ CAPSULE_RADIUS_PX = 18
 def capsule_outline():
     """The Outline of a silhouette that is one capsule (radius CAPSULE_RADIUS_PX around CAPSULE)."""
     import cv2
-    from mvpose_nodes.contour import outer_contour
-    from mvpose_nodes.objective import outline_of
+    from mvpose_nodes.vision.contour import outer_contour
+    from mvpose_nodes.fitting.objective import outline_of
     mask = np.zeros(IMAGE_SIZE[::-1], np.uint8)
     cv2.line(mask, tuple(map(int, CAPSULE[0])), tuple(map(int, CAPSULE[1])), 1, 2 * CAPSULE_RADIUS_PX + 1)
     return outline_of(outer_contour(mask))
 
 
 def outline_terms(outline, start, end, radius, terminal=False):
-    from mvpose_nodes.objective import inside_cost, outline_cost
+    from mvpose_nodes.fitting.objective import inside_cost, outline_cost
     starts, ends = np.array([start], float), np.array([end], float)
     return (outline_cost(outline.points, starts, ends, np.array([radius], float), np.array([terminal]), 10.0, 20.0),
             inside_cost(starts, ends, outline))
 
 
 def test_capsule_residuals_match_a_brute_force_distance():
-    from mvpose_nodes.objective import capsule_residuals
+    from mvpose_nodes.fitting.objective import capsule_residuals
     rng = np.random.default_rng(5)
     starts, ends = rng.uniform(0, 400, (3, 2)), rng.uniform(0, 400, (3, 2))
     radii = rng.uniform(5, 20, 3)

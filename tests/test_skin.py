@@ -9,8 +9,8 @@ import io
 import numpy as np
 import pytest
 
-from mvpose_nodes.errors import UserError
-from mvpose_nodes.skin import BINS, SkinModel, detect_skin, f1_score, skin_regions
+from mvpose_nodes.tools.cli import UserError
+from mvpose_nodes.vision.skin import BINS, SkinModel, detect_skin, f1_score, skin_regions
 
 SKIN_MEAN, SKIN_SPREAD = (200, 140, 110), 12
 BACKGROUND_MEANS = ((40, 70, 180), (110, 25, 30))  # blue, dark red; plus greys of any level

@@ -5,7 +5,7 @@ import itertools
 import numpy as np
 import pytest
 
-from mvpose_nodes.sync import ApproximateTimeSynchronizer
+from mvpose_nodes.fitting.sync import ApproximateTimeSynchronizer
 
 MS = 1_000_000
 PERIOD_NS = 40 * MS

@@ -9,12 +9,12 @@ from conftest import assert_one_line_error, run_mvpose
 from rclpy.serialization import deserialize_message
 from rosbags.highlevel import AnyReader
 
-from mvpose_nodes.bagfile import BagReader
-from mvpose_nodes.body_model import JOINT_NAMES
-from mvpose_nodes.camera_bag import GROUND_TRUTH_TOPIC, camera_topics, frame_number_of
-from mvpose_nodes.interfaces import message_class
-from mvpose_nodes.rosconv import camera_from_messages, image_from_compressed, joints_from_skeleton, stamp_ns
-from mvpose_nodes.studio import SKIN_BIT
+from mvpose_nodes.io.bagfile import BagReader
+from mvpose_nodes.body.model import JOINT_NAMES
+from mvpose_nodes.ros.camera_bag import GROUND_TRUTH_TOPIC, camera_topics, frame_number_of
+from mvpose_nodes.io.interfaces import message_class
+from mvpose_nodes.ros.conversions import camera_from_messages, image_from_compressed, joints_from_skeleton, stamp_ns
+from mvpose_nodes.studio.scene import SKIN_BIT
 
 CAMERAS = (3, 5, 7)
 FRAMES = (60, 63)
@@ -100,8 +100,8 @@ def test_whole_walk_of_the_paper_frames_stays_in_the_paper_cameras():
     """Frames 52–101 at 1080p: the whole person (joints, toes, fingertips, hair above the vertex)
     is inside the image of cameras 3, 5 and 7, as in the paper's choice of frames and cameras."""
     from types import SimpleNamespace
-    from mvpose_nodes.camera import studio_rig
-    from mvpose_nodes.synth_cli import make_motion
+    from mvpose_nodes.body.camera import studio_rig
+    from mvpose_nodes.app.synth import make_motion
     motion = make_motion(SimpleNamespace(frames='52-101', clip='07_01', motion='walk', height=1.75, seed=0))
     points = np.concatenate([motion.joints, motion.toes, motion.hand_tips], axis=1).reshape(-1, 3)
     for camera in studio_rig(cameras=CAMERAS):

@@ -6,13 +6,13 @@ PACKAGE = 'mvpose_nodes'
 
 # Every node and tool is a console script in lib/mvpose_nodes, where `ros2 run` finds it.
 EXECUTABLES = {
-    'camera_features': 'mvpose_nodes.camera_features_node:main',
-    'skeleton_fitter': 'mvpose_nodes.skeleton_fitter_node:main',
-    'marker_tracker': 'mvpose_nodes.marker_tracker_node:main',
-    'marker_skeleton': 'mvpose_nodes.marker_skeleton_node:main',
-    'bag': 'mvpose_nodes.bag_cli:main',
-    'topic': 'mvpose_nodes.topic_cli:main',
-    'launch': 'mvpose_nodes.launcher:main',
+    'camera_features': 'mvpose_nodes.nodes.camera_features:main',
+    'skeleton_fitter': 'mvpose_nodes.nodes.skeleton_fitter:main',
+    'marker_tracker': 'mvpose_nodes.nodes.marker_tracker:main',
+    'marker_skeleton': 'mvpose_nodes.nodes.marker_skeleton:main',
+    'bag': 'mvpose_nodes.tools.bag:main',
+    'topic': 'mvpose_nodes.tools.topic:main',
+    'launch': 'mvpose_nodes.tools.launch:main',
 }
 
 setup(

@@ -1,0 +1,138 @@
+"""One run of the whole mvpose graph on a camera bag over DDS (what `demo` and `bench` share).
+
+The launch file's nodes (three camera_features and the skeleton_fitter, config/mvpose.launch.yaml) run
+as separate processes, supervised by launcher.Launch, their output going to a log file; `bag play`
+replays the bag's images, calibration and ground truth once every subscriber downstream is connected;
+a viewer node in this process receives /mvpose/skeleton and /mvpose/ground_truth, reports each fitted
+frame, and the run records both to an output bag.
+"""
+import subprocess
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from mvpose_nodes.tools.cli import UserError
+
+FEATURE_TOPICS = ('silhouette', 'skin_ellipses', 'labelled_contour')
+GRAPH_CAMERAS = (3, 5, 7)        # those of config/mvpose.launch.yaml
+CONNECT_TIMEOUT = 60.0           # [s] for every node to start and every topic to connect
+QUIET_AFTER_PLAYBACK = 10.0      # [s] of no new skeleton after playback ends: the graph is done
+
+
+@dataclass
+class GraphRun:
+    """What one run saw: skeletons {stamp_ns: Skeleton} fitted and true, the number of frame sets
+    played, the wall time of the playback and of the whole run [s], and the nodes' log."""
+    fitted: dict = field(default_factory=dict)
+    truth: dict = field(default_factory=dict)
+    frame_sets: int = 0
+    playback_seconds: float = 0.0
+    seconds: float = 0.0
+    log: Path = None
+
+
+def launch_file():
+    """config/mvpose.launch.yaml of the checkout that runs."""
+    from mvpose_nodes.app.main import repository_root
+    return repository_root() / 'ros_ws' / 'src' / 'mvpose_nodes' / 'config' / 'mvpose.launch.yaml'
+
+
+def run_graph(bag, log_path, rate=1.0, on_skeleton=None):
+    """Run the graph on `bag` (its cameras GRAPH_CAMERAS) and return a GraphRun.
+
+    rate: playback speed (1 = the bag's 25 frames per second); on_skeleton(message, run): called for
+    each fitted skeleton as it arrives. Raises UserError when the graph does not come up.
+    """
+    import rclpy
+    from mvpose_msgs.msg import Skeleton
+    from mvpose_nodes.io.bagfile import BagReader
+    from mvpose_nodes.ros.camera_bag import GROUND_TRUTH_TOPIC, SKELETON_TOPIC
+    from mvpose_nodes.tools.launch import Launch, load_launch_file
+    from mvpose_nodes.ros.conversions import stamp_ns
+    from mvpose_nodes.ros.helpers import LATCHED, StopSignal
+
+    reader = BagReader(bag)
+    images = [f'/cam{k}/image_raw/compressed' for k in GRAPH_CAMERAS]
+    missing = [topic for topic in images if topic not in reader.topics]
+    if missing:
+        raise UserError(f"bag '{bag}' lacks {', '.join(missing)} (the graph fits cameras {list(GRAPH_CAMERAS)})")
+    played = images + [f'/cam{k}/{kind}' for k in GRAPH_CAMERAS for kind in ('camera_info', 'camera_pose')]
+    if GROUND_TRUTH_TOPIC in reader.topics:
+        played.append(GROUND_TRUTH_TOPIC)
+    run = GraphRun(frame_sets=reader.topics[images[0]].message_count, log=Path(log_path))
+    run.log.parent.mkdir(parents=True, exist_ok=True)
+    started = time.monotonic()
+    playback_start = None
+    with open(run.log, 'w') as log, StopSignal() as stop:
+        launch = Launch(load_launch_file(launch_file()), output=log)
+        node = rclpy.create_node('mvpose_graph_viewer')
+
+        def fitted(message):
+            stamp = stamp_ns(message.header)
+            run.fitted[stamp] = message
+            if on_skeleton:
+                on_skeleton(message, run)
+        node.create_subscription(Skeleton, SKELETON_TOPIC, fitted, LATCHED)
+        node.create_subscription(Skeleton, GROUND_TRUTH_TOPIC,
+                                 lambda message: run.truth.__setitem__(stamp_ns(message.header), message), 100)
+        try:
+            launch.start()
+            wait_for_connections(node, launch, stop)
+            player = subprocess.Popen([sys.executable, '-m', 'mvpose_nodes.app.main', 'bag', 'play', str(bag),
+                                       '--topics', *played, '--wait-for-subscribers', '--delay', '1.0', '--rate', str(rate)],
+                                      stdout=log, stderr=subprocess.STDOUT)
+            playback_start = time.monotonic()
+            last_seen, count = time.monotonic(), 0
+            while not stop.stopped:
+                rclpy.spin_once(node, timeout_sec=0.1)
+                if len(run.fitted) != count:
+                    last_seen, count = time.monotonic(), len(run.fitted)
+                if player.poll() is not None:
+                    if not run.playback_seconds:
+                        run.playback_seconds = time.monotonic() - playback_start
+                    if count >= run.frame_sets or time.monotonic() - max(last_seen, playback_start
+                                                                        + run.playback_seconds) > QUIET_AFTER_PLAYBACK:
+                        break
+                if launch.wait(timeout=0) is not None:
+                    raise UserError(f'a node of the graph stopped (exit code {launch.exit_code}); see {run.log}')
+            if player.poll() is None:
+                player.terminate()
+            elif player.returncode:
+                raise UserError(f'bag play failed (exit code {player.returncode}); see {run.log}')
+        finally:
+            node.destroy_node()
+            launch.stop()
+    run.seconds = time.monotonic() - started
+    return run
+
+
+def wait_for_connections(node, launch, stop):
+    """Until every camera's feature topics and /mvpose/skeleton have their publishers and subscribers
+    (the player waits for its own subscribers only, not for the nodes downstream of them)."""
+    import rclpy
+    topics = [f'/cam{k}/{name}' for k in GRAPH_CAMERAS for name in FEATURE_TOPICS]
+    deadline = time.monotonic() + CONNECT_TIMEOUT
+    while not stop.stopped:
+        if all(node.count_publishers(t) and node.count_subscribers(t) for t in topics) and \
+                node.count_publishers('/mvpose/skeleton'):
+            time.sleep(1.0)  # discovery is done; give the endpoints a moment to match
+            return
+        if launch.wait(timeout=0) is not None:
+            raise UserError(f'a node of the graph stopped while starting (exit code {launch.exit_code})')
+        if time.monotonic() > deadline:
+            raise UserError(f'the graph did not connect within {CONNECT_TIMEOUT:.0f} s')
+        rclpy.spin_once(node, timeout_sec=0.1)
+
+
+def write_run_bag(run, path):
+    """Record the run's fitted and true skeletons to a rosbag2 MCAP bag at `path`."""
+    from rclpy.serialization import serialize_message
+    from mvpose_nodes.io.bagfile import BagWriter
+    from mvpose_nodes.ros.camera_bag import GROUND_TRUTH_TOPIC, SKELETON_TOPIC, STREAM_QOS
+    with BagWriter(path) as out:
+        for topic, messages in ((SKELETON_TOPIC, run.fitted), (GROUND_TRUTH_TOPIC, run.truth)):
+            if messages:
+                out.add_topic(topic, 'mvpose_msgs/msg/Skeleton', [STREAM_QOS])
+                for stamp in sorted(messages):
+                    out.write(topic, serialize_message(messages[stamp]), stamp)

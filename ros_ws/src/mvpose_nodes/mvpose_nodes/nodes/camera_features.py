@@ -1,0 +1,137 @@
+"""camera_features: one camera's images -> silhouette, skin ellipses and labelled contour (paper 000 Sec. 3).
+
+Started once per camera in its namespace, which gives the camera number:
+    ./mvpose run camera_features --ros-args -r __ns:=/cam3
+Subscribes image_raw/compressed and image_raw (rgb8/bgr8), and camera_info (to check image sizes);
+publishes silhouette (mono8, 0/255), skin_ellipses, labelled_contour and, with publish_overlay,
+features_overlay, each with the source image's header unchanged. Bad input (undecodable or wrongly
+encoded images, sizes that disagree with camera_info, no person) is logged once per cause and
+answered with empty features carrying a status; the node keeps running.
+"""
+from mvpose_msgs.msg import LabelledContour, SkinEllipseArray
+from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult)
+from rclpy.node import Node
+from sensor_msgs.msg import CameraInfo, CompressedImage, Image
+
+from mvpose_nodes.ros.params import PARAMETERS, check, settings_from
+from mvpose_nodes.tools.cli import UserError
+from mvpose_nodes.vision.features import FeatureExtractor, draw_features
+from mvpose_nodes.ros.conversions import ImageError, colour_image, empty_feature_messages, feature_messages, rgb_image
+from mvpose_nodes.ros.helpers import LATCHED, ReportOnce, camera_of_namespace, run_node
+from mvpose_nodes.vision.silhouette import BackgroundModel
+from mvpose_nodes.vision.skin import SkinModel
+from mvpose_nodes.app.skin import default_model_path
+
+STREAM_DEPTH = 5
+
+
+def descriptor(parameter):
+    """The ParameterDescriptor of a camera_features_config.Parameter: description, range, choices."""
+    result = ParameterDescriptor(description=parameter.description)
+    if parameter.choices:
+        result.additional_constraints = f"one of: {', '.join(parameter.choices)}"
+    if parameter.range and isinstance(parameter.default, int) and not isinstance(parameter.default, bool):
+        result.integer_range = [IntegerRange(from_value=parameter.range[0], to_value=parameter.range[1], step=1)]
+    elif parameter.range:
+        result.floating_point_range = [FloatingPointRange(from_value=float(parameter.range[0]),
+                                                          to_value=float(parameter.range[1]), step=0.0)]
+    return result
+
+
+class CameraFeaturesNode(ReportOnce, Node):
+    def __init__(self):
+        super().__init__('camera_features')
+        self.camera = camera_of_namespace(self.get_namespace(), 'camera_features')
+        for parameter in PARAMETERS:
+            self.declare_parameter(parameter.name, parameter.default, descriptor(parameter))
+        self.values = {p.name: self.get_parameter(p.name).value for p in PARAMETERS}
+        problems = [problem for p in PARAMETERS if (problem := check(p, self.values[p.name]))]
+        if problems:
+            raise UserError('; '.join(problems))
+        self.extractor = self.make_extractor(self.values)
+        self.add_on_set_parameters_callback(self.on_set_parameters)
+        self.camera_info = None
+        self.background_frames = []
+        self.silhouette_publisher = self.create_publisher(Image, 'silhouette', STREAM_DEPTH)
+        self.ellipses_publisher = self.create_publisher(SkinEllipseArray, 'skin_ellipses', STREAM_DEPTH)
+        self.contour_publisher = self.create_publisher(LabelledContour, 'labelled_contour', STREAM_DEPTH)
+        self.overlay_publisher = self.create_publisher(Image, 'features_overlay', STREAM_DEPTH)
+        for kind, topic in ((CompressedImage, 'image_raw/compressed'), (Image, 'image_raw')):
+            resolved = self.resolve_topic_name(topic)
+            self.create_subscription(kind, topic, lambda message, t=resolved: self.on_image(message, t), STREAM_DEPTH)
+        self.create_subscription(CameraInfo, 'camera_info', self.on_camera_info, LATCHED)
+        self.get_logger().info(f'camera {self.camera}: {self.values["silhouette_method"]} silhouettes, '
+                               f'skin model {self.values["skin_model"] or default_model_path()}')
+
+    def make_extractor(self, values):
+        path = values['skin_model'] or default_model_path()
+        return FeatureExtractor(settings_from(values), SkinModel.load(path))
+
+    def on_set_parameters(self, changes):
+        values = dict(self.values)
+        for change in changes:
+            parameter = next((p for p in PARAMETERS if p.name == change.name), None)
+            if parameter is None:
+                continue
+            problem = check(parameter, change.value)
+            if problem:
+                return SetParametersResult(successful=False, reason=problem)
+            values[change.name] = change.value
+        try:
+            self.extractor = self.make_extractor(values)
+        except UserError as error:
+            return SetParametersResult(successful=False, reason=str(error))
+        self.values, self.background_frames = values, []
+        return SetParametersResult(successful=True)
+
+    def on_camera_info(self, message):
+        if message.width <= 0 or message.height <= 0:
+            self.report_once('bad camera_info', f'{self.resolve_topic_name("camera_info")}: no image size '
+                                                f'({message.width}×{message.height}); sizes are not checked')
+            return
+        self.camera_info = message
+
+    def on_image(self, message, topic):
+        try:
+            rgb = colour_image(message)
+        except ImageError as error:
+            return self.reject(message.header, *error.size, f'{error.kind}: {topic}', f'{topic}: {error}')
+        self.process(rgb, message.header, topic)
+
+    def reject(self, header, width, height, cause, reason):
+        self.report_once(cause, f'{reason}; publishing empty features with STATUS_BAD_INPUT')
+        self.publish(*empty_feature_messages(header, width, height, LabelledContour.STATUS_BAD_INPUT, reason))
+
+    def process(self, rgb, header, topic):
+        height, width = rgb.shape[:2]
+        if self.camera_info is None:
+            self.report_once('no camera_info', f'no camera_info on {self.resolve_topic_name("camera_info")} yet: '
+                                               'image sizes are not checked until it arrives')
+        elif (self.camera_info.width, self.camera_info.height) != (width, height):
+            return self.reject(header, width, height, f'size: {topic}',
+                               f'{topic}: image is {width}×{height} but camera_info says '
+                               f'{self.camera_info.width}×{self.camera_info.height}')
+        if self.values['silhouette_method'] == 'background' and self.extractor.background is None:
+            self.background_frames.append(rgb)
+            if len(self.background_frames) < self.values['background_frames']:
+                return self.reject(header, width, height, 'learning', 'learning the background from the first '
+                                   f"{self.values['background_frames']} frames (no person expected in them)")
+            self.extractor.background = BackgroundModel.from_frames(self.background_frames)
+            self.background_frames = []
+            return
+        features = self.extractor(rgb)
+        if not features.person:
+            self.report_once('no person', f'{topic}: no person found (publishing empty features, '
+                                          'STATUS_NO_PERSON; logged once)')
+        self.publish(*feature_messages(features, header))
+        if self.values['publish_overlay']:
+            self.overlay_publisher.publish(rgb_image(draw_features(rgb, features), header))
+
+    def publish(self, silhouette, ellipses, contour):
+        self.silhouette_publisher.publish(silhouette)
+        self.ellipses_publisher.publish(ellipses)
+        self.contour_publisher.publish(contour)
+
+
+def main(args=None):
+    return run_node(CameraFeaturesNode, args)

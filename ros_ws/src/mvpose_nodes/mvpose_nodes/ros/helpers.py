@@ -1,0 +1,158 @@
+"""rclpy helpers shared by the nodes and tools: the Jazzy run pattern, QoS conversions, graph look-ups."""
+import re
+import signal
+import sys
+import threading
+import time
+
+import rclpy
+from rclpy.duration import Duration
+from rclpy.executors import ExternalShutdownException
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.signals import SignalHandlerOptions
+
+from mvpose_nodes.io.bagfile import DEFAULT_QOS_PROFILE
+from mvpose_nodes.tools.cli import UserError
+
+# Reliable, transient-local, depth 1: calibration, and the last skeleton for late subscribers.
+LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+
+
+class ReportOnce:
+    """Mixin for a Node: report_once(cause, text) logs a warning the first time each cause occurs, so a
+    stream of bad messages logs once and the node keeps going."""
+
+    def report_once(self, cause, text):
+        reported = self.__dict__.setdefault('_reported_causes', set())
+        if cause not in reported:
+            reported.add(cause)
+            self.get_logger().warning(text)
+
+
+def camera_of_namespace(namespace, executable):
+    """The camera number K of a per-camera node's namespace /cam<K>; UserError naming the executable."""
+    match = re.match(r'^/cam(\d+)$', namespace)
+    if not match:
+        raise UserError(f"{executable} must run in a camera's namespace /cam<K> (e.g. --ros-args -r "
+                        f"__ns:=/cam3); it runs in '{namespace}'")
+    return int(match[1])
+
+
+def run_node(make_node, args=None):
+    """Jazzy's rclpy run pattern for a node that spins until Ctrl-C or shutdown; the exit code.
+    A UserError while the node starts (bad parameter, namespace, model file) is one line and code 2."""
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = make_node()
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except UserError as error:
+        print(f'[ERROR] {make_node.__name__}: {error}', file=sys.stderr)
+        return 2
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+class StopSignal:
+    """Catch SIGINT/SIGTERM ourselves (rclpy's handler would shut the context down at once),
+    so that a tool can drain what the middleware still holds before it exits."""
+
+    def __init__(self):
+        self.event = threading.Event()
+
+    def __enter__(self):
+        rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
+        self._previous = {sig: signal.signal(sig, self._handle) for sig in (signal.SIGINT, signal.SIGTERM)}
+        return self
+
+    def _handle(self, signum, frame):
+        self.event.set()
+
+    @property
+    def stopped(self):
+        return self.event.is_set()
+
+    def __exit__(self, *exc):
+        for sig, handler in self._previous.items():
+            signal.signal(sig, handler)
+        rclpy.try_shutdown()
+
+
+def qos_to_dict(profile):
+    """rclpy QoSProfile -> the dict rosbag2 stores (metadata version 9 spelling)."""
+    def duration(value):
+        nanoseconds = value.nanoseconds if hasattr(value, 'nanoseconds') else 0
+        return {'sec': nanoseconds // 10**9, 'nsec': nanoseconds % 10**9}
+    return {
+        'history': profile.history.short_key, 'depth': profile.depth,
+        'reliability': profile.reliability.short_key, 'durability': profile.durability.short_key,
+        'deadline': duration(profile.deadline), 'lifespan': duration(profile.lifespan),
+        'liveliness': profile.liveliness.short_key,
+        'liveliness_lease_duration': duration(profile.liveliness_lease_duration),
+        'avoid_ros_namespace_conventions': profile.avoid_ros_namespace_conventions,
+    }
+
+
+def _policy(policy_class, value, default):
+    """A QoS policy from a stored value: short key ('reliable') or the rmw enum integer."""
+    try:
+        return policy_class.get_from_short_key(value) if isinstance(value, str) else policy_class(int(value))
+    except (KeyError, ValueError, TypeError):
+        return policy_class.get_from_short_key(default)
+
+
+def qos_from_dict(stored):
+    """The history, depth, reliability and durability of a stored profile as a QoSProfile."""
+    merged = {**DEFAULT_QOS_PROFILE, **(stored or {})}
+    history = _policy(HistoryPolicy, merged['history'], 'keep_last')
+    if history not in (HistoryPolicy.KEEP_LAST, HistoryPolicy.KEEP_ALL):
+        history = HistoryPolicy.KEEP_LAST
+    return QoSProfile(
+        history=history, depth=max(1, int(merged.get('depth') or DEFAULT_QOS_PROFILE['depth'])),
+        reliability=_policy(ReliabilityPolicy, merged['reliability'], 'reliable'),
+        durability=_policy(DurabilityPolicy, merged['durability'], 'volatile'))
+
+
+def subscription_qos_for(node, topic, depth=10):
+    """A QoS that matches every current publisher of `topic`, as `ros2 topic echo` and
+    `ros2 bag record` choose it: reliable only if all publishers are reliable, transient-local
+    only if all are (so that a late subscriber still gets what they latched)."""
+    publishers = node.get_publishers_info_by_topic(topic)
+    reliable = bool(publishers) and all(p.qos_profile.reliability == ReliabilityPolicy.RELIABLE for p in publishers)
+    latched = bool(publishers) and all(p.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL
+                                       for p in publishers)
+    return QoSProfile(
+        depth=depth,
+        reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
+        durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE)
+
+
+def topic_types(node):
+    """{topic: type name} of the live graph (first type when a topic has several)."""
+    return {name: types[0] for name, types in node.get_topic_names_and_types() if types}
+
+
+def wait_for_publishers(node, topic, timeout, stop=None):
+    """Spin until `topic` has a publisher; the type name it publishes, or None after `timeout` [s].
+
+    Subscribing only then lets the subscription QoS match the publishers (see subscription_qos_for)."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline and not (stop and stop.stopped):
+        publishers = node.get_publishers_info_by_topic(topic)
+        if publishers:
+            return publishers[0].topic_type
+        rclpy.spin_once(node, timeout_sec=0.1)
+    return None
+
+
+def wait_for_acknowledgements(publishers, timeout_sec):
+    """Give reliable subscribers the time to take what was published before the process exits."""
+    deadline = time.monotonic() + timeout_sec
+    for publisher in publishers:
+        remaining = max(0.0, deadline - time.monotonic())
+        publisher.wait_for_all_acked(Duration(seconds=remaining))

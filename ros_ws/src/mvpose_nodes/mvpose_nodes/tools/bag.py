@@ -1,0 +1,235 @@
+"""`bag record | play | info`: rosbag2-compatible MCAP bags without rosbag2.
+
+The bags are ordinary rosbag2 bags (see bagfile.py): `ros2 bag info/play` of a
+system ROS 2 install and the `rosbags` library read what `bag record` writes,
+and `bag play` plays what `ros2 bag record -s mcap` wrote.
+"""
+import datetime
+import sys
+import time
+
+from mvpose_nodes.io.bagfile import BagReader, BagWriter, directory_size
+from mvpose_nodes.tools.cli import ArgumentParser, UserError, exit_on_user_error
+from mvpose_nodes.io.interfaces import message_class
+
+# Topics that carry calibration: latched on playback so that nodes started late still get them.
+LATCHED_TOPIC_SUFFIXES = ('/camera_info', '/camera_pose')
+DISCOVERY_PERIOD = 0.5  # [s] how often `record` looks for new topics
+DRAIN_TIME = 0.5  # [s] how long `record` keeps taking messages after Ctrl-C
+
+
+def build_parser(prog):
+    parser = ArgumentParser(prog=prog, description=__doc__.splitlines()[0])
+    verbs = parser.add_subparsers(dest='verb', metavar='VERB', required=True)
+
+    record = verbs.add_parser('record', help='record live topics into a new bag directory',
+                              description='Record live topics into a rosbag2 directory (metadata.yaml + .mcap). '
+                                          'Stops on Ctrl-C, after writing everything already received.')
+    chosen = record.add_mutually_exclusive_group(required=True)
+    chosen.add_argument('--topics', nargs='+', metavar='TOPIC', help='topics to record')
+    chosen.add_argument('-a', '--all', action='store_true', help='record every topic (new ones too)')
+    record.add_argument('-o', '--output', help='bag directory to create (default: rosbag2_YYYY_MM_DD-hh_mm_ss)')
+
+    play = verbs.add_parser('play', help='replay a bag at its recorded timing',
+                            description='Publish the stored messages of a bag directory or bare .mcap file '
+                                        'at their recorded timing. Calibration topics (*/camera_info, '
+                                        '*/camera_pose) and topics recorded as transient-local are published '
+                                        'transient-local, so subscribers that start late still get them.')
+    play.add_argument('bag', help='bag directory or .mcap file')
+    play.add_argument('-r', '--rate', type=float, default=1.0, help='playback speed factor (default 1.0)')
+    play.add_argument('-l', '--loop', action='store_true', help='start again at the end until Ctrl-C')
+    play.add_argument('--start-offset', type=float, default=0.0, metavar='S',
+                      help='skip the first S seconds of the bag')
+    play.add_argument('--topics', nargs='+', metavar='TOPIC', help='play only these topics')
+    play.add_argument('-d', '--delay', type=float, default=0.0, metavar='S',
+                      help='wait S seconds after creating the publishers before the first message '
+                           '(gives subscribers time to discover them)')
+    play.add_argument('--wait-for-subscribers', type=float, nargs='?', const=30.0, default=0.0, metavar='S',
+                      help='before the first message, wait up to S seconds (default 30 when given) until every '
+                           'played topic (and /clock with --clock) has a matched subscriber, so that a graph started beside the player '
+                           'loses nothing (then --delay still applies)')
+    play.add_argument('--clock', type=float, nargs='?', const=40.0, default=0.0, metavar='HZ',
+                      help='also publish the bag time on /clock at HZ (default 40 when given)')
+
+    info = verbs.add_parser('info', help='summarise a bag', description='Print what a bag holds, like ros2 bag info.')
+    info.add_argument('bag', help='bag directory or .mcap file')
+    return parser
+
+
+def main(argv=None, prog='bag'):
+    args = build_parser(prog).parse_args(sys.argv[1:] if argv is None else argv)
+    with exit_on_user_error(f'{prog} {args.verb}'):
+        if args.verb == 'info':
+            print(describe(BagReader(args.bag), args.bag))
+        elif args.verb == 'play':
+            play(args)
+        else:
+            record(args)
+    return 0
+
+
+def format_time(ns):
+    stamp = datetime.datetime.fromtimestamp(ns / 1e9, tz=datetime.timezone.utc)
+    return f'{stamp:%b %d %Y %H:%M:%S.%f}'[:-3] + f' ({ns // 10**9}.{ns % 10**9:09d})'
+
+
+def describe(bag, path):
+    """The text of `bag info`, laid out like `ros2 bag info`."""
+    size = directory_size(path)
+    lines = [
+        f"Files:             {', '.join(str(f.name) for f in bag.files)}",
+        f'Bag size:          {size / 2**20:.1f} MiB',
+        'Storage id:        mcap',
+        f"ROS Distro:        {bag.metadata.get('ros_distro', 'unknown')}",
+        f'Duration:          {bag.duration_ns / 1e9:.9f}s',
+        f'Start:             {format_time(bag.start_ns)}',
+        f'End:               {format_time(bag.end_ns)}',
+        f'Messages:          {bag.message_count}',
+        'Topic information:',
+    ]
+    width = max((len(t) for t in bag.topics), default=0)
+    for topic in sorted(bag.topics.values(), key=lambda t: t.name):
+        lines.append(f'  Topic: {topic.name:<{width}} | Type: {topic.type} | Count: {topic.message_count} | '
+                     f'Serialization Format: {topic.serialization_format}')
+    return '\n'.join(lines)
+
+
+def play(args):
+    if args.rate <= 0:
+        raise UserError(f'--rate must be > 0 (got {args.rate})')
+    if min(args.start_offset, args.delay, args.clock, args.wait_for_subscribers) < 0:
+        raise UserError('--start-offset, --delay, --clock and --wait-for-subscribers must not be negative')
+    bag = BagReader(args.bag)
+    topics = list(bag.topics) if not args.topics else args.topics
+    missing = [t for t in topics if t not in bag.topics]
+    if missing:
+        raise UserError(f"topic(s) {', '.join(missing)} not in bag '{args.bag}' (it has: {', '.join(sorted(bag.topics))})")
+    classes = {t: message_class(bag.topics[t].type) for t in topics}
+
+    import rclpy  # after the checks above, so that bad input fails fast with one line
+    from rosgraph_msgs.msg import Clock
+    from rclpy.qos import DurabilityPolicy
+    from mvpose_nodes.ros.helpers import StopSignal, qos_from_dict, wait_for_acknowledgements
+
+    with StopSignal() as stop:
+        node = rclpy.create_node('mvpose_bag_player')
+        publishers = {}
+        for topic in topics:
+            info = bag.topics[topic]
+            qos = qos_from_dict(info.offered_qos_profiles[0] if info.offered_qos_profiles else None)
+            if topic.endswith(LATCHED_TOPIC_SUFFIXES):
+                qos.durability = DurabilityPolicy.TRANSIENT_LOCAL
+            publishers[topic] = node.create_publisher(classes[topic], topic, qos)
+        clock = node.create_publisher(Clock, '/clock', 10) if args.clock else None
+        if args.wait_for_subscribers:
+            wait_for_subscribers(node, {**publishers, **({'/clock': clock} if clock else {})},
+                                 args.wait_for_subscribers, stop)
+        stop.event.wait(args.delay)
+        begin_ns = bag.start_ns + int(args.start_offset * 1e9)
+        played = 0
+        try:
+            while not stop.stopped:
+                played += play_once(bag, topics, begin_ns, publishers, clock, args, stop)
+                if not args.loop:
+                    break
+            wait_for_acknowledgements(publishers.values(), timeout_sec=2.0)
+        finally:
+            node.destroy_node()
+    print(f'[play] published {played} messages on {len(topics)} topics', file=sys.stderr)
+
+
+def wait_for_subscribers(node, publishers, timeout, stop):
+    """Until every topic has a matched subscriber, and as many as the graph knows of (a topic with two
+    subscribers, e.g. camera_info read by a feature node and the fitter, waits for both)."""
+    deadline = time.monotonic() + timeout
+    unmatched = list(publishers)
+    while unmatched and time.monotonic() < deadline and not stop.stopped:
+        stop.event.wait(0.05)
+        unmatched = [topic for topic, publisher in publishers.items()
+                     if publisher.get_subscription_count() < max(1, node.count_subscribers(topic))]
+    if unmatched:
+        print(f"[play] no subscriber after {timeout:g} s on: {', '.join(unmatched)}; playing anyway", file=sys.stderr)
+
+
+def play_once(bag, topics, begin_ns, publishers, clock, args, stop):
+    """Publish the bag once from `begin_ns` at `args.rate`; the number of messages published."""
+    from builtin_interfaces.msg import Time
+    from rosgraph_msgs.msg import Clock
+    wall_start = time.monotonic()
+    clock_period = 1.0 / args.clock if clock else None
+    next_clock = wall_start
+    count = 0
+    total = max(1, bag.end_ns - begin_ns)
+    show_progress = sys.stderr.isatty()
+    for topic_info, log_time_ns, data in bag.messages(topics=topics, start_ns=begin_ns):
+        due = wall_start + (log_time_ns - begin_ns) / 1e9 / args.rate
+        while not stop.stopped:
+            now = time.monotonic()
+            if clock and now >= next_clock:
+                bag_ns = begin_ns + int((now - wall_start) * args.rate * 1e9)
+                bag_ns = min(bag_ns, log_time_ns)
+                clock.publish(Clock(clock=Time(sec=bag_ns // 10**9, nanosec=bag_ns % 10**9)))
+                next_clock += clock_period
+            if now >= due:
+                break
+            stop.event.wait((min(due, next_clock) if clock else due) - now)
+        if stop.stopped:
+            break
+        publishers[topic_info.name].publish(data)
+        count += 1
+        if show_progress and count % 10 == 0:
+            print(f'\r[play] {(log_time_ns - begin_ns) / 1e9:7.2f} s  {100 * (log_time_ns - begin_ns) / total:5.1f} %'
+                  f'  {count} messages', end='', file=sys.stderr, flush=True)
+    if show_progress:
+        print(file=sys.stderr)
+    return count
+
+
+def record(args):
+    import rclpy
+    from mvpose_nodes.ros.helpers import StopSignal, qos_to_dict, subscription_qos_for, topic_types
+
+    output = args.output or datetime.datetime.now().strftime('rosbag2_%Y_%m_%d-%H_%M_%S')
+    wanted = None if args.all else set(args.topics)
+    with StopSignal() as stop, BagWriter(output) as bag:
+        node = rclpy.create_node('mvpose_bag_recorder')
+        subscriptions = {}
+        unknown_types = set()
+
+        def write(topic):
+            def callback(data):
+                bag.write(topic, data, node.get_clock().now().nanoseconds)
+            return callback
+
+        def discover():
+            for topic, type_name in topic_types(node).items():
+                if topic in subscriptions or (wanted is not None and topic not in wanted) or topic in unknown_types:
+                    continue
+                try:
+                    msg_class = message_class(type_name)
+                except UserError as error:
+                    unknown_types.add(topic)
+                    print(f'[record] skipping {topic}: {error}', file=sys.stderr)
+                    continue
+                offered = [qos_to_dict(p.qos_profile) for p in node.get_publishers_info_by_topic(topic)]
+                bag.add_topic(topic, type_name, offered)
+                subscriptions[topic] = node.create_subscription(
+                    msg_class, topic, write(topic), subscription_qos_for(node, topic, depth=100), raw=True)
+                print(f'[record] recording {topic} ({type_name})', file=sys.stderr, flush=True)
+
+        node.create_timer(DISCOVERY_PERIOD, discover)
+        discover()
+        print(f'[record] writing {output}; Ctrl-C to stop', file=sys.stderr, flush=True)
+        while not stop.stopped:
+            rclpy.spin_once(node, timeout_sec=0.1)
+        # Take what the middleware already holds before closing: nothing received is lost.
+        drain_until = time.monotonic() + DRAIN_TIME
+        while time.monotonic() < drain_until:
+            rclpy.spin_once(node, timeout_sec=0.05)
+        node.destroy_node()
+        counts = bag.metadata()['rosbag2_bagfile_information']['message_count']
+    print(f'[record] wrote {counts} messages on {len(subscriptions)} topics to {output}', file=sys.stderr)
+
+
+if __name__ == '__main__':
+    sys.exit(main())

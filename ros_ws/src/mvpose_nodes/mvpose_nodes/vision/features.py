@@ -1,0 +1,332 @@
+"""One camera image -> the features the skeleton is fitted to (paper 000 Sec. 3, Fig. 1): silhouette,
+silhouette keypoints, skin regions with their ellipses and the keypoints read off them, and the
+contour labelled into body parts.
+
+Ellipses: direct least-squares, ellipse-specific fit (Fitzgibbon, Pilu & Fisher 1999; OpenCV's
+fitEllipseDirect implements it) to each skin region's boundary. Interpretation (paper 000 Sec. 3.2):
+the face ellipse (the skin region at the top of the silhouette) gives the lower neck at the lower end
+of its major axis, and the head top where the major axis, continued upwards, leaves the silhouette
+(the hair is not skin); a forearm ellipse (short sleeves) gives the elbow at the end nearer the neck
+and the hand at the other; a hand ellipse (long sleeves) gives the hand only. The wrist joint lies
+WRIST_FRACTION of the way from the elbow end to the hand end of a forearm ellipse.
+
+Left and right: the face decides whether the camera sees the person's front (much skin on the head)
+or back; from the front the person's left is on the image right. Keypoint names are those of
+mvpose_msgs/Skeleton plus "root" (the silhouette centroid).
+"""
+import math
+import time
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+
+from mvpose_nodes.body.model import LABEL_NONE
+from mvpose_nodes.vision.contour import ContourLabels, label_contour
+from mvpose_nodes.vision.silhouette import chroma_key_foreground, clean_mask, silhouette_keypoints
+from mvpose_nodes.vision.skin import detect_skin, skin_regions
+
+ROLE_UNKNOWN, ROLE_FACE, ROLE_HAND, ROLE_FOREARM = range(4)   # SkinEllipse.ROLE_*
+SIDE_NONE, SIDE_LEFT, SIDE_RIGHT = range(3)                    # SkinEllipse.SIDE_*
+WRIST_FRACTION = 0.62    # wrist along a forearm+hand skin ellipse, from the elbow end (forearm 0.27 m, hand 0.18 m)
+FOREARM_ELONGATION = 2.2  # major/minor above which a limb skin region is a forearm (sleeves 'auto')
+FRONT_SKIN_FRACTION = 0.3  # skin share of the head above which the camera sees the face
+HEAD_FRACTION = 0.13     # head (vertex to chin) as a share of the stature
+NECK_BELOW_TOP = 0.17    # base of the neck below the head top, as a share of the stature (no face seen)
+NECK_BELOW_SKIN = 0.03   # base of the neck below the lowest skin of the neck, as a share of the stature
+BOX_SCALE = 4            # the person is found on an image this many times smaller, then processed in its box
+BOX_MARGIN = 0.05        # of the person's size, around its box
+KEYPOINT_NAMES = ('root', 'head', 'neck', 'left_wrist', 'right_wrist', 'left_elbow', 'right_elbow',
+                  'left_ankle', 'right_ankle', 'left_knee', 'right_knee')
+
+
+@dataclass(frozen=True)
+class FeatureSettings:
+    """The parameters of the pipeline (the camera_features node's parameters, same names)."""
+    silhouette_method: str = 'chroma'       # 'chroma' (blue screen) or 'background' (learned model)
+    blueness_threshold: int = 25            # [DN] chroma key: b − max(r, g) above it is blue screen
+    min_person_fraction: float = 0.001      # smallest person blob, as a share of the image area
+    skin_threshold: float = 1.0             # log-likelihood ratio L above which a pixel is skin
+    skin_min_area_fraction: float = 0.00003  # smallest skin region, as a share of the image area
+    sleeves: str = 'auto'                   # 'short', 'long' or 'auto' (from the regions' elongation)
+
+
+@dataclass
+class Keypoint:
+    x: float = 0.0
+    y: float = 0.0
+    confidence: float = 0.0
+    visible: bool = False
+
+
+@dataclass
+class SkinEllipseFeature:
+    """A skin region's ellipse (pixels; angle [rad] of the major axis from +x towards +y)."""
+    center: tuple
+    semi_major: float
+    semi_minor: float
+    angle: float
+    end_a: Keypoint
+    end_b: Keypoint
+    area: int
+    role: int = ROLE_UNKNOWN
+    side: int = SIDE_NONE
+    confidence: float = 0.0
+
+
+@dataclass
+class Features:
+    """Everything computed from one image; `person` False means no person was found."""
+    person: bool
+    silhouette: np.ndarray            # (H, W) bool
+    skin: np.ndarray                  # (H, W) bool
+    ellipses: list = field(default_factory=list)
+    keypoints: dict = field(default_factory=dict)   # name -> Keypoint, every KEYPOINT_NAMES entry
+    contour: ContourLabels = None
+    frontness: float = 0.0                           # share of the head that is skin: 1 = the face is seen
+    timings: dict = field(default_factory=dict)      # stage -> seconds
+
+    def visible_keypoints(self):
+        """{name: (x, y, confidence)} of the keypoints found (as the camera_features messages carry them)."""
+        return {name: (k.x, k.y, k.confidence) for name, k in self.keypoints.items() if k.visible}
+
+
+def ellipse_of(points):
+    """Direct least-squares ellipse of boundary points (N, 2): (centre, semi-major, semi-minor, angle)."""
+    (cx, cy), (width, height), degrees = cv2.fitEllipseDirect(points.astype(np.float32).reshape(-1, 1, 2))
+    angle = math.radians(degrees)
+    if height > width:  # OpenCV's angle is that of the `width` axis
+        width, height, angle = height, width, angle + math.pi / 2
+    angle = (angle + math.pi / 2) % math.pi - math.pi / 2  # into [−π/2, π/2)
+    return (cx, cy), width / 2, height / 2, angle
+
+
+class FeatureExtractor:
+    """The per-image pipeline for one camera: `extractor(rgb) -> Features`."""
+
+    def __init__(self, settings, skin_model, background=None):
+        """`background`: the BackgroundModel that silhouette_method 'background' needs (it may be set
+        later, once person-free frames have been seen)."""
+        self.settings, self.skin_model, self.background = settings, skin_model, background
+
+    def __call__(self, rgb):
+        timings, clock = {}, time.perf_counter()
+
+        def lap(stage):
+            nonlocal clock
+            now = time.perf_counter()
+            timings[stage] = now - clock
+            clock = now
+
+        height, width = rgb.shape[:2]
+        area = height * width
+        s = self.settings
+        min_person = max(50, int(s.min_person_fraction * area))
+        box = self._person_box(rgb, min_person)
+        silhouette, skin = np.zeros((height, width), bool), np.zeros((height, width), bool)
+        if box is None:
+            lap('silhouette')
+            return Features(False, silhouette, skin, keypoints={n: Keypoint() for n in KEYPOINT_NAMES}, timings=timings)
+        # Everything after finding the person works in its box: a tenth of a 1080p image or less.
+        x0, y0, x1, y1 = box
+        crop = rgb[y0:y1, x0:x1]
+        person = clean_mask(self._foreground(crop, (slice(y0, y1), slice(x0, x1))), min_area=min_person)
+        silhouette[y0:y1, x0:x1] = person
+        if self.background is not None:
+            self.background.update(rgb, silhouette)
+        lap('silhouette')
+        points = silhouette_keypoints(person)
+        lap('silhouette keypoints')
+        if points is None:
+            return Features(False, silhouette, skin, keypoints={n: Keypoint() for n in KEYPOINT_NAMES}, timings=timings)
+        min_skin = max(10, int(s.skin_min_area_fraction * area))
+        skin_crop = detect_skin(self.skin_model, crop, s.skin_threshold, region=person, min_area=min_skin)
+        skin[y0:y1, x0:x1] = skin_crop
+        regions = skin_regions(skin_crop, min_area=min_skin)
+        lap('skin')
+        ellipses, keypoints, hand_masks, frontness = self._interpret(regions, person, points, skin_crop)
+        lap('ellipses')
+        contour = label_contour(person, {n: (k.x, k.y) if k.visible else None for n, k in keypoints.items()},
+                                hand_masks)
+        lap('contour')
+        features = Features(True, silhouette, skin, ellipses, keypoints, contour, frontness, timings)
+        return _shifted(features, x0, y0)
+
+    def _foreground(self, rgb, window):
+        """Foreground pixels of `rgb`, which is the part `window` (row and column slices) of the image."""
+        if self.settings.silhouette_method == 'chroma':
+            return chroma_key_foreground(rgb, self.settings.blueness_threshold)
+        if self.background is None:
+            raise ValueError("silhouette_method 'background' needs a BackgroundModel first")
+        return self.background.foreground(rgb, window)
+
+    def _person_box(self, rgb, min_person):
+        """(x0, y0, x1, y1) around the largest foreground blob, found on a 4× smaller image, with a
+        margin of BOX_MARGIN of the blob's size; None when there is no blob of a person's size."""
+        height, width = rgb.shape[:2]
+        small = cv2.resize(rgb, (width // BOX_SCALE, height // BOX_SCALE), interpolation=cv2.INTER_NEAREST)
+        foreground = self._foreground(small, (slice(0, height, BOX_SCALE), slice(0, width, BOX_SCALE)))
+        count, _, stats, _ = cv2.connectedComponentsWithStats(foreground.astype(np.uint8), connectivity=8)
+        if count < 2:
+            return None
+        largest = 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
+        if stats[largest, cv2.CC_STAT_AREA] * BOX_SCALE ** 2 < min_person:
+            return None
+        x, y, w, h = (int(v) * BOX_SCALE for v in stats[largest, :4])
+        margin = int(BOX_MARGIN * max(w, h)) + 2 * BOX_SCALE
+        return max(x - margin, 0), max(y - margin, 0), min(x + w + margin, width), min(y + h + margin, height)
+
+    def _interpret(self, regions, silhouette, points, skin):
+        # In the person's box: `silhouette`, `skin`, `points` and `regions` are in its coordinates.
+        """Ellipses with roles and sides, the keypoints, and the hands' masks for contour labelling."""
+        stature = points.height
+        ellipses = []
+        for region in regions:
+            if len(region.boundary) < 5:
+                continue
+            center, semi_major, semi_minor, angle = ellipse_of(region.boundary)
+            axis = np.array([math.cos(angle), math.sin(angle)])
+            end_a, end_b = np.array(center) - semi_major * axis, np.array(center) + semi_major * axis
+            ellipses.append((region, SkinEllipseFeature(center, semi_major, semi_minor, angle,
+                                                        Keypoint(*end_a, 1.0, True), Keypoint(*end_b, 1.0, True),
+                                                        int(region.area))))
+        keypoints = {name: Keypoint() for name in KEYPOINT_NAMES}
+        keypoints['root'] = Keypoint(*points.root, 0.9, True)
+        face = self._face(ellipses, points)
+        front = self._head(face, keypoints, silhouette, points, skin, stature)
+        hand_masks = self._hands([e for e in ellipses if e is not face], keypoints, front, skin)
+        self._legs(points, keypoints, front)
+        return [e for _, e in ellipses], keypoints, hand_masks, front
+
+    @staticmethod
+    def _face(ellipses, points):
+        """The skin region whose centre is within the head (top HEAD_FRACTION·1.6 of the stature), highest first."""
+        head_limit = points.top[1] + 1.6 * HEAD_FRACTION * points.height
+        candidates = [e for e in ellipses if e[1].center[1] < head_limit]
+        return min(candidates, key=lambda e: e[1].center[1]) if candidates else None
+
+    @staticmethod
+    def _head(face, keypoints, silhouette, points, skin, stature):
+        """Head top and lower neck; returns the frontness in [0, 1] (1: the camera sees the face)."""
+        top_x, top_y = points.top
+        head_rows = slice(int(top_y), int(top_y + HEAD_FRACTION * stature) + 1)
+        head_pixels = silhouette[head_rows].sum()
+        frontness = float(skin[head_rows].sum() / head_pixels) if head_pixels else 0.0
+        if face is None:
+            keypoints['head'] = Keypoint(top_x, top_y, 0.6, True)
+            keypoints['neck'] = Keypoint(top_x, top_y + NECK_BELOW_TOP * stature, 0.3, True)
+            return frontness
+        region, ellipse = face
+        ellipse.role, ellipse.confidence = ROLE_FACE, 0.9
+        # The lower neck: where the face-and-neck skin ends (the collar), a little above the shoulder line.
+        boundary = region.boundary
+        bottom = boundary[:, 1].max()
+        collar = boundary[boundary[:, 1] >= bottom - 0.01 * stature]
+        keypoints['neck'] = Keypoint(float(collar[:, 0].mean()), float(bottom + NECK_BELOW_SKIN * stature), 0.8, True)
+        # The head top: the hair is not skin, so not the face ellipse's upper end but where the
+        # silhouette ends above the face.
+        keypoints['head'] = Keypoint(top_x, top_y, 0.8, True)
+        return frontness
+
+    def _hands(self, limb_ellipses, keypoints, frontness, skin):
+        """Wrists and elbows from the (at most two) largest non-face skin regions."""
+        neck = np.array([keypoints['neck'].x, keypoints['neck'].y])
+        hands = sorted(limb_ellipses, key=lambda e: -e[1].area)[:2]
+        found = []
+        for region, ellipse in hands:
+            ends = sorted((ellipse.end_a, ellipse.end_b), key=lambda k: np.hypot(k.x - neck[0], k.y - neck[1]))
+            near, far = np.array([ends[0].x, ends[0].y]), np.array([ends[1].x, ends[1].y])
+            forearm = self.settings.sleeves == 'short' or (
+                self.settings.sleeves == 'auto' and ellipse.semi_major > FOREARM_ELONGATION * ellipse.semi_minor)
+            if forearm:
+                ellipse.role = ROLE_FOREARM
+                wrist, elbow = near + WRIST_FRACTION * (far - near), near
+            else:
+                ellipse.role = ROLE_HAND
+                wrist, elbow = np.array(ellipse.center) + 0.5 * (near - np.array(ellipse.center)), None
+            found.append((region, ellipse, wrist, elbow))
+        # From the front the person's left hand is on the image right.
+        found.sort(key=lambda h: h[2][0], reverse=frontness >= FRONT_SKIN_FRACTION)
+        sides = ['left', 'right'] if len(found) == 2 else [self._single_side(found[0][2], keypoints, frontness)] \
+            if found else []
+        confidence = 0.5 + 0.4 * min(1.0, abs(frontness - FRONT_SKIN_FRACTION) / FRONT_SKIN_FRACTION)
+        hand_masks = {}
+        for side, (region, ellipse, wrist, elbow) in zip(sides, found):
+            ellipse.side, ellipse.confidence = (SIDE_LEFT if side == 'left' else SIDE_RIGHT), confidence
+            keypoints[f'{side}_wrist'] = Keypoint(*map(float, wrist), confidence, True)
+            if elbow is not None:
+                keypoints[f'{side}_elbow'] = Keypoint(*map(float, elbow), confidence, True)
+            mask = np.zeros(skin.shape, np.uint8)
+            cv2.drawContours(mask, [region.boundary.reshape(-1, 1, 2)], -1, 1, cv2.FILLED)
+            hand_masks[side] = mask.astype(bool)
+        return hand_masks
+
+    @staticmethod
+    def _single_side(wrist, keypoints, frontness):
+        """One hand seen: its side from where it is relative to the root."""
+        image_right = wrist[0] > keypoints['root'].x
+        return 'left' if image_right == (frontness >= FRONT_SKIN_FRACTION) else 'right'
+
+    @staticmethod
+    def _legs(points, keypoints, frontness):
+        legs = list(points.legs)
+        if len(legs) == 2 and frontness >= FRONT_SKIN_FRACTION:
+            legs.reverse()  # image-left leg is the person's right from the front
+        sides = ['left', 'right'] if len(legs) == 2 else []
+        for side, leg in zip(sides, legs):
+            keypoints[f'{side}_ankle'] = Keypoint(*leg['ankle'], leg['confidence'], True)
+            if leg['knee'] is not None:
+                keypoints[f'{side}_knee'] = Keypoint(*leg['knee'], leg['confidence'] * 0.8, True)
+
+
+def _shifted(features, dx, dy):
+    """Features computed in a box whose top-left pixel is (dx, dy), moved to image coordinates."""
+    for keypoint in features.keypoints.values():
+        keypoint.x += dx
+        keypoint.y += dy
+    for ellipse in features.ellipses:
+        ellipse.center = (ellipse.center[0] + dx, ellipse.center[1] + dy)
+        for end in (ellipse.end_a, ellipse.end_b):
+            end.x += dx
+            end.y += dy
+    if features.contour is not None and len(features.contour.points):
+        features.contour.points = features.contour.points + np.array([dx, dy], dtype=features.contour.points.dtype)
+    return features
+
+
+def contour_label_agreement(contour, truth_labels):
+    """Share of labelled contour pixels whose label equals the ground-truth part label (H, W) uint8
+    under them; pixels where the truth is LABEL_NONE do not count."""
+    labelled = (contour.labels != LABEL_NONE) & (truth_labels[contour.points[:, 1], contour.points[:, 0]] != LABEL_NONE)
+    if not labelled.any():
+        return 0.0
+    x, y = contour.points[labelled, 0], contour.points[labelled, 1]
+    return float(np.mean(truth_labels[y, x] == contour.labels[labelled]))
+
+
+PART_COLOURS = {1: (255, 255, 0), 2: (255, 0, 255), 3: (0, 255, 0), 4: (255, 128, 0), 5: (0, 255, 255),
+                6: (255, 0, 0), 7: (0, 128, 255), 8: (128, 0, 255)}  # by LABEL_*, RGB
+
+
+def draw_features(rgb, features):
+    """The image (RGB uint8, a copy) with the features drawn on: the contour coloured by body part
+    (thin where SIDE_A, thick where SIDE_B), the ellipses and their axes, and the keypoints."""
+    canvas = rgb.copy()
+    if not features.person:
+        return canvas
+    scale = max(1, rgb.shape[1] // 960)
+    if features.contour is not None:
+        for (x, y), label, side in zip(features.contour.points, features.contour.labels, features.contour.sides):
+            if label:
+                cv2.circle(canvas, (int(x), int(y)), scale * (1 if side == 1 else 2), PART_COLOURS[int(label)], -1)
+    for ellipse in features.ellipses:
+        box = (ellipse.center, (2 * ellipse.semi_major, 2 * ellipse.semi_minor), math.degrees(ellipse.angle))
+        cv2.ellipse(canvas, box, (255, 255, 255), scale, cv2.LINE_AA)
+        cv2.line(canvas, (int(ellipse.end_a.x), int(ellipse.end_a.y)), (int(ellipse.end_b.x), int(ellipse.end_b.y)),
+                 (255, 255, 255), scale, cv2.LINE_AA)
+    for name, keypoint in features.keypoints.items():
+        if keypoint.visible:
+            colour = (0, 255, 0) if name.startswith('left') else (255, 64, 64) if name.startswith('right') \
+                else (255, 255, 0)
+            cv2.drawMarker(canvas, (int(keypoint.x), int(keypoint.y)), colour, cv2.MARKER_CROSS, 12 * scale, 2 * scale)
+    return canvas
