@@ -9,7 +9,8 @@ from rclpy.serialization import serialize_message
 from mvpose_nodes.io.bagfile import BagWriter
 from mvpose_nodes.body.model import JOINT_NAMES
 from mvpose_nodes.body.camera import studio_rig
-from mvpose_nodes.fitting.fitter import KEYPOINT_JOINT, SkeletonFitter, View
+from mvpose_nodes.fitting.fitter import SkeletonFitter, View
+from mvpose_nodes.fitting.stage_search import KEYPOINT_JOINT
 from mvpose_nodes.studio.mocap import cmu_clip, load_bvh, retarget
 from mvpose_nodes.ros.conversions import skeleton_message
 
@@ -124,7 +125,7 @@ def test_time_jump_or_reversal_reinitialises_and_missing_evidence_keeps_a_limb()
     fit = fitter.fit(3.04, exact_views(cameras, motion.joints[4], without_left_arm))
     left_arm = next(s for s in fit.stages if s.name == 'left_arm')
     assert not left_arm.fitted and left_arm.evaluations == 0
-    from mvpose_nodes.fitting.fitter import STAGE_PARAMETERS
+    from mvpose_nodes.fitting.stage_search import STAGE_PARAMETERS
     from mvpose_nodes.body.kinematics import P
     indices = [P[n] for n in STAGE_PARAMETERS['left_arm']]
     assert np.array_equal(fit.parameters[indices], before[indices]), 'the left arm keeps its angles'
@@ -152,10 +153,11 @@ def walk_found(motion, frame, rng, swap):
 def test_limb_tracks_correct_a_wrong_start_and_keep_the_sides_through_a_walk():
     """Started the wrong way round (no face seen), the pairs are put right once the person is seen
     walking (within 0.2 s) and then stay right through the strides, whatever the triangulation's order."""
-    from mvpose_nodes.fitting.fitter import LimbTracks
+    from mvpose_nodes.fitting.limb_sides import LimbTracks
+    from mvpose_nodes.fitting.settings import FitterSettings
     motion = retarget(load_bvh(cmu_clip('07_01'))).placed()
     rng = np.random.default_rng(3)
-    tracks = LimbTracks()
+    tracks = LimbTracks(FitterSettings())
     wrong = []
     for frame in range(60):
         swap = {limb: bool(rng.integers(2)) for limb in ('knee', 'ankle', 'elbow', 'wrist')}

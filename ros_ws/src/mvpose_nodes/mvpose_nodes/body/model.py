@@ -42,6 +42,10 @@ PARAMETER_NAMES = (
     'right_forearm_rx',                                              # RX15
 )
 
+# Where each name sits in a joints (15, 3) array and a parameters (29,) vector.
+JOINT_INDEX = {name: index for index, name in enumerate(JOINT_NAMES)}
+PARAMETER_INDEX = {name: index for index, name in enumerate(PARAMETER_NAMES)}
+
 STAGE_NAMES = ('torso', 'head_neck', 'left_arm', 'right_arm', 'left_leg', 'right_leg')
 
 
@@ -80,9 +84,8 @@ ORIENTING_BONES = {
 def torso_frame(joints):
     """3×3 rotation (columns x forward, y left, z up) of the torso from joints (15, 3) [m]:
     z along pelvis→neck, y along right_hip→left_hip made orthogonal to z."""
-    index = {name: i for i, name in enumerate(JOINT_NAMES)}
-    up = normalize(joints[index['neck']] - joints[index['pelvis']])
-    left = joints[index['left_hip']] - joints[index['right_hip']]
+    up = normalize(joints[JOINT_INDEX['neck']] - joints[JOINT_INDEX['pelvis']])
+    left = joints[JOINT_INDEX['left_hip']] - joints[JOINT_INDEX['right_hip']]
     left = normalize(left - np.dot(left, up) * up)
     return np.column_stack([np.cross(left, up), left, up])
 
@@ -93,7 +96,6 @@ def joint_orientations(joints):
     Each joint's frame is the torso frame turned by the smallest rotation that takes its orienting
     bone from the rest direction to the posed one (paper 004's exact axis-angle → quaternion, Eq. 3–4),
     so a person standing in the rest pose has every joint frame equal to the torso frame."""
-    index = {name: i for i, name in enumerate(JOINT_NAMES)}
     torso = torso_frame(joints)
     orientations = []
     for name in JOINT_NAMES:
@@ -102,7 +104,7 @@ def joint_orientations(joints):
             orientations.append(quaternion_from_matrix(torso))
             continue
         start, end, rest = bone
-        local = torso.T @ (joints[index[end]] - joints[index[start]])
+        local = torso.T @ (joints[JOINT_INDEX[end]] - joints[JOINT_INDEX[start]])
         orientations.append(quaternion_from_matrix(torso @ matrix_from_quaternion(rotation_between(rest, local))))
     return np.array(orientations)
 

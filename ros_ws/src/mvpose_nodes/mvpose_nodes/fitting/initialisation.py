@@ -1,0 +1,154 @@
+"""Initialisation of the fit from the views' 2D keypoints (paper 000 Sec. 3.1 and 6; paper 004).
+
+On the first frame and after a jump in time the fitter has no previous pose: the keypoints are
+triangulated across the views (one disagreeing view left out), left and right told apart by the face
+where a camera sees it, the person's bone lengths estimated (the template scaled to the height, the
+legs and head measured), and the joints the keypoints do not locate completed from the template, ready
+for paper 004's inverse kinematics. Every frame after that uses `triangulated_joints` too, as the
+frame's own evidence beside the pose carried over from the last frame.
+"""
+import numpy as np
+
+from mvpose_nodes.body.kinematics import bone_lengths, forward_kinematics
+from mvpose_nodes.body.model import JOINT_INDEX, PARAMETER_NAMES
+from mvpose_nodes.body.triangulation import best_assignment, triangulate
+from mvpose_nodes.fitting.stage_search import KEYPOINT_JOINT
+from mvpose_nodes.vision.features import FRONT_SKIN_FRACTION
+
+PAIRED_LIMBS = ('knee', 'ankle', 'elbow', 'wrist')   # keypoints that come as a left/right pair
+TEMPLATE_HEIGHT = 1.75   # [m] the stature at which ankle_height was measured on the template
+
+
+def robust_triangulate(cameras, pixels, weights, outlier_rms):
+    """A DLT triangulation (triangulation.triangulate) that leaves out the one view that disagrees: with
+    three or more views and an RMS reprojection error above outlier_rms [px], the subset without the view
+    whose removal lowers the error most is used if it brings the error under outlier_rms. pixels (V, 2)
+    [px] (NaN where unseen), weights (V,); (3,) point [m], or None."""
+    found = triangulate(cameras, pixels, weights)
+    if found is None:
+        return None
+    point, rms = found
+    usable = [i for i in range(len(cameras)) if np.all(np.isfinite(pixels[i])) and weights[i] > 0]
+    if rms > outlier_rms and len(usable) >= 3:
+        trials = []
+        for left_out in usable:
+            reduced = weights.copy()
+            reduced[left_out] = 0.0
+            trial = triangulate(cameras, pixels, reduced)
+            if trial is not None:
+                trials.append(trial)
+        best = min(trials, key=lambda t: t[1], default=None)
+        if best is not None and best[1] < outlier_rms:
+            point = best[0]
+    return point
+
+
+def triangulated_joints(views, settings):
+    """{joint: (3,) [m]} triangulated from the views' keypoints, or None without root, neck and head in
+    two views. Each left/right pair is assigned consistently across the views, but which of the two
+    is the person's left is not decided here (labelled_joints and limb_sides.LimbTracks do)."""
+    cameras = [view.camera for view in views]
+
+    def pixels(name):
+        return np.array([view.keypoints.get(name, (np.nan, np.nan, 0))[:2] for view in views], float)
+
+    def weights(name):
+        return np.array([view.keypoints.get(name, (0, 0, 0.0))[2] for view in views], float)
+    joints = {}
+    for name in ('root', 'neck', 'head'):
+        found = robust_triangulate(cameras, pixels(name), weights(name), settings.outlier_rms)
+        if found is None:
+            return None
+        joints[KEYPOINT_JOINT.get(name, name)] = found
+    for limb in PAIRED_LIMBS:
+        left_pixels, right_pixels = pixels(f'left_{limb}'), pixels(f'right_{limb}')
+        pair_weights = np.column_stack([weights(f'left_{limb}'), weights(f'right_{limb}')])
+        pair = best_assignment(cameras, left_pixels, right_pixels, pair_weights)
+        if pair is None:
+            continue
+        swaps = pair[2]
+        observed = np.where(swaps[:, None], right_pixels, left_pixels), np.where(swaps[:, None], left_pixels, right_pixels)
+        observed_weights = np.where(swaps, pair_weights[:, 1], pair_weights[:, 0]), np.where(swaps, pair_weights[:, 0], pair_weights[:, 1])
+        left, right_point = (robust_triangulate(cameras, p, w, settings.outlier_rms)
+                             for p, w in zip(observed, observed_weights))
+        if left is None or right_point is None:
+            continue
+        joints[f'left_{limb}'], joints[f'right_{limb}'] = left, right_point
+    return joints
+
+
+def facing_right(views, joints, face_evidence):
+    """The person's right (unit, horizontal) from where the face is seen: the cameras that see the
+    face are in front of the person (paper 000's views cannot tell left from right otherwise).
+    None when no view says (all side views)."""
+    pelvis = joints['pelvis']
+    forward = np.zeros(3)
+    for view in views:
+        if view.frontness is None:
+            continue
+        towards = view.camera.center - pelvis
+        towards[2] = 0.0
+        forward += (view.frontness - FRONT_SKIN_FRACTION) * towards / np.linalg.norm(towards)
+    if np.linalg.norm(forward) < face_evidence:
+        return None
+    return np.cross(forward / np.linalg.norm(forward), [0.0, 0.0, 1.0])
+
+
+def labelled_joints(views, settings):
+    """triangulated_joints with each pair's left and right from the face where a view sees it; or None."""
+    joints = triangulated_joints(views, settings)
+    if joints is None:
+        return None
+    right = facing_right(views, joints, settings.face_evidence)
+    if right is not None:  # which of each pair is the person's left: the face's side tells
+        for limb in PAIRED_LIMBS:
+            left, right_name = f'left_{limb}', f'right_{limb}'
+            if left in joints and right_name in joints and np.dot(joints[left] - joints[right_name], right) > 0:
+                joints[left], joints[right_name] = joints[right_name], joints[left]
+    return joints
+
+
+def person_lengths(joints, settings):
+    """Bone lengths of the person, on the first frame: the template scaled to the height (head above
+    the ankles), then the legs and the head measured (the template's proportions are an average
+    person's; a measurement within ±length_trust of the template's value is believed).
+    The legs: a standing or stance leg is nearly straight, so the longer pelvis–ankle distance is
+    about √(hip² + (thigh + shin)²); the knee keypoints are too rough to split it (features.py
+    takes them from a band of the silhouette), so the template's thigh : shin proportion is kept."""
+    ankle_height = settings.ankle_height
+    ankles = [joints[n][2] for n in ('left_ankle', 'right_ankle') if n in joints]
+    height = joints['head'][2] - (min(ankles) - ankle_height * TEMPLATE_HEIGHT if ankles else 0.0)
+    lengths = bone_lengths(float(np.clip(height / (1 - ankle_height) if ankles else height, 1.2, 2.2)))
+    reach = max((np.linalg.norm(joints[n] - joints['pelvis']) for n in ('left_ankle', 'right_ankle') if n in joints),
+                default=0.0)
+    if reach > lengths['hip']:
+        leg = np.sqrt(reach ** 2 - lengths['hip'] ** 2)
+        scale = leg / (lengths['thigh'] + lengths['shin'])
+        if abs(scale - 1) < settings.length_trust:
+            lengths['thigh'] *= scale
+            lengths['shin'] *= scale
+    head = np.linalg.norm(joints['head'] - joints['neck'])
+    if abs(head / lengths['head'] - 1) < settings.length_trust:
+        lengths['head'] = float(head)
+    return lengths
+
+
+def completed_joints(found, lengths):
+    """All 15 joints (15, 3) [m] for inverse kinematics: the triangulated ones (`found`, {joint: (3,)}),
+    the rest from the template of bone `lengths` turned to the found torso."""
+    up = found['neck'] - found['pelvis']
+    up /= np.linalg.norm(up)
+    sideways = [found[f'right_{n}'] - found[f'left_{n}'] for n in PAIRED_LIMBS if f'left_{n}' in found]
+    right = np.sum(sideways, axis=0) if sideways else np.cross([0.0, 0.0, 1.0], up) + [1e-3, 0, 0]
+    right -= np.dot(right, up) * up
+    right /= np.linalg.norm(right)
+    rest, _ = forward_kinematics(np.zeros(len(PARAMETER_NAMES)), lengths)
+    frame = np.column_stack([right, np.cross(up, right), up])
+    joints = found['pelvis'] + (rest - rest[JOINT_INDEX['pelvis']]) @ frame.T
+    for name, position in found.items():
+        joints[JOINT_INDEX[name]] = position
+    joints[JOINT_INDEX['left_hip']] = found['pelvis'] - lengths['hip'] * right
+    joints[JOINT_INDEX['right_hip']] = found['pelvis'] + lengths['hip'] * right
+    joints[JOINT_INDEX['left_shoulder']] = found['neck'] - lengths['clavicle'] * right
+    joints[JOINT_INDEX['right_shoulder']] = found['neck'] + lengths['clavicle'] * right
+    return joints

@@ -1,0 +1,166 @@
+"""Left and right: which limb of each pair is the person's left, tracked from frame to frame.
+
+A single view often cannot tell left from right (vision/features.py), and paper 000 does not say how
+to. The triangulated pairs are labelled by LimbTracks (continuity, and the direction of travel while
+walking); each camera's left/right labels of legs and arms are then swapped where the labelled pose
+projects better onto the swapped ones (oriented_view); and a walking torso that faces away from its
+direction of travel is turned back (facing_travel). Beyond the paper; measured in docs/method.md.
+"""
+from dataclasses import replace
+
+import numpy as np
+
+from mvpose_nodes.body.kinematics import forward_kinematics
+from mvpose_nodes.body.model import JOINT_INDEX, LABEL_LEFT_LEG, LABEL_RIGHT_LEG, PARAMETER_INDEX
+
+SWAPPABLE = {'legs': ('knee', 'ankle'), 'arms': ('elbow', 'wrist')}
+
+
+def exchange(joints, name):
+    """Swap joints['left_' + name] and joints['right_' + name] (when both are there)."""
+    left, right = f'left_{name}', f'right_{name}'
+    if left in joints and right in joints:
+        joints[left], joints[right] = joints[right], joints[left]
+
+
+class LimbTracks:
+    """Which of each triangulated left/right pair (knees, ankles, elbows, wrists) is the person's left.
+
+    Single views cannot tell (features.py), and the face's direction is too rough to (20° off moves a
+    60 cm stride 20 cm sideways). Two cues decide, frame by frame and pair by pair:
+    - continuity: the labelling whose points lie nearer the positions predicted from the last two fitted
+      poses at constant velocity; decisive while the two limbs are far apart (mid-stride), weak when
+      they pass each other;
+    - sides: while the person walks (pelvis faster than walking_speed over walking_baseline), the
+      direction of travel is forward and the left limb lies to its left; knees and ankles are 5–20 cm
+      apart sideways all through a walk (CMU 07_01), elbows more.
+    The evidence of each, in metres: continuity (d(a, p_r)² + d(b, p_l)² − d(a, p_l)² − d(b, p_r)²) /
+    continuity_scale, the sides' the lateral offset of the "left" point to the right; the labelling is
+    exchanged when their sum says so. Until the person is first seen walking (after a (re)start), the
+    labels come from the face (initialisation.labelled_joints) or are a guess: continuity would keep
+    a wrong guess, so on that first walking frame each group (legs, arms) is labelled by its mean lateral
+    offset over the remembered fits alone. Someone walking backwards would be labelled mirrored.
+    settings: FitterSettings (walking_speed, walking_baseline, continuity_scale).
+    """
+
+    def __init__(self, settings):
+        self.settings = settings
+        self.history = []   # [(stamp [s], joints (15, 3) [m])] of the fits within walking_baseline
+        self.anchored = False  # whether the sides have been seen while walking since the (re)start
+        self.exchanges = 0  # exchanged pairs so far (for diagnostics)
+
+    def restart(self):
+        self.history.clear()
+        self.anchored = False
+
+    def append(self, stamp, joints):
+        baseline = self.settings.walking_baseline
+        self.history = [(t, p) for t, p in self.history if stamp - t <= baseline] + [(stamp, joints.copy())]
+
+    def predicted(self, stamp):
+        """Joints (15, 3) expected at `stamp` (constant velocity from the last two fits), or None."""
+        if not self.history:
+            return None
+        t1, p1 = self.history[-1]
+        if len(self.history) < 2 or t1 <= self.history[-2][0]:
+            return p1
+        t0, p0 = self.history[-2]
+        return p1 + (p1 - p0) * (stamp - t1) / (t1 - t0)
+
+    def walking_right(self):
+        """The person's right (3,) unit horizontal, from the direction of travel; None when not walking."""
+        if len(self.history) < 2 or self.history[-1][0] - self.history[0][0] < self.settings.walking_baseline / 4:
+            return None
+        (t0, p0), (t1, p1) = self.history[0], self.history[-1]
+        velocity = (p1[JOINT_INDEX['pelvis']] - p0[JOINT_INDEX['pelvis']]) / (t1 - t0)
+        velocity[2] = 0.0
+        speed = np.linalg.norm(velocity)
+        return np.cross(velocity / speed, [0.0, 0.0, 1.0]) if speed > self.settings.walking_speed else None
+
+    def label(self, stamp, found):
+        """Exchange, in `found` ({joint: (3,)} triangulated), the pairs that belong the other way round."""
+        right = self.walking_right()
+        if right is not None and not self.anchored:
+            self.anchor(right, found)
+        predicted = self.predicted(stamp)
+        if predicted is None:
+            return
+        for name in ('knee', 'ankle', 'elbow', 'wrist'):
+            left, right_name = f'left_{name}', f'right_{name}'
+            if left not in found or right_name not in found:
+                continue
+            a, b = found[left], found[right_name]
+            p_left, p_right = predicted[JOINT_INDEX[left]], predicted[JOINT_INDEX[right_name]]
+            evidence = (np.sum((a - p_right) ** 2) + np.sum((b - p_left) ** 2)
+                        - np.sum((a - p_left) ** 2) - np.sum((b - p_right) ** 2)) / self.settings.continuity_scale
+            if right is not None:
+                evidence -= np.dot(a - b, right)
+            if evidence < 0:
+                exchange(found, name)
+                self.exchanges += 1
+
+    def anchor(self, right, found):
+        """Label each group by its mean lateral offset over the history and `found` (see the class)."""
+        self.anchored = True
+        for names in SWAPPABLE.values():
+            offsets = [np.dot(joints[JOINT_INDEX[f'left_{n}']] - joints[JOINT_INDEX[f'right_{n}']], right)
+                       for _, joints in self.history for n in names]
+            offsets += [np.dot(found[f'left_{n}'] - found[f'right_{n}'], right) for n in names
+                        if f'left_{n}' in found and f'right_{n}' in found]
+            if np.mean(offsets) > 0:
+                for name in names:
+                    exchange(found, name)
+                    pair = [JOINT_INDEX[f'left_{name}'], JOINT_INDEX[f'right_{name}']]
+                    for _, joints in self.history:
+                        joints[pair] = joints[pair[::-1]]
+                self.exchanges += 1
+
+
+def facing_travel(parameters, lengths, right, yaw_limit):
+    """The parameters (29,) with the torso turned about the vertical to face the direction of travel
+    (`right`: the person's right from LimbTracks.walking_right, or None when not walking) if the torso's
+    right is more than yaw_limit [rad] away from the walk's; and whether it was turned. The outline and
+    the midlines look much the same from the front and from the back, and a poor initial guess (no face
+    seen, the limbs' pairs not yet labelled) would otherwise stay; people walk forwards. Rz is the
+    outermost of the torso's Euler angles: the turn adds to torso_rz."""
+    if right is None:
+        return parameters, False
+    joints, _ = forward_kinematics(parameters, lengths)
+    torso_right = joints[JOINT_INDEX['right_hip']] - joints[JOINT_INDEX['left_hip']]
+    turn = np.arctan2(right[1], right[0]) - np.arctan2(torso_right[1], torso_right[0])
+    turn = (turn + np.pi) % (2 * np.pi) - np.pi
+    if abs(turn) <= yaw_limit:
+        return parameters, False
+    turned = parameters.copy()
+    rz = PARAMETER_INDEX['torso_rz']
+    turned[rz] = (turned[rz] + turn + np.pi) % (2 * np.pi) - np.pi
+    return turned, True
+
+
+def oriented_view(view, joints):
+    """The view (fitter.View) with its left/right labels of legs and arms swapped where `joints` (15, 3)
+    [m], the frame's reference pose, say they are."""
+    keypoints = dict(view.keypoints)
+    distances = view.distances
+    for group, names in SWAPPABLE.items():
+        # The group's keypoints (a whole pair, or one side only when a limb is hidden) against the
+        # reference's projected joints of the same side and of the other.
+        seen = [f'{side}_{n}' for n in names for side in ('left', 'right') if f'{side}_{n}' in keypoints]
+        if not seen:
+            continue
+        other_side = [name.replace('left_', 'RIGHT_').replace('right_', 'left_').replace('RIGHT_', 'right_')
+                      for name in seen]
+        projected, _ = view.camera.project(joints[[JOINT_INDEX[name] for name in seen + other_side]])
+        observed = np.array([keypoints[name][:2] for name in seen])
+        straight = np.linalg.norm(projected[:len(seen)] - observed, axis=1).sum()
+        if np.linalg.norm(projected[len(seen):] - observed, axis=1).sum() < straight:
+            for name in names:
+                left, right = f'left_{name}', f'right_{name}'
+                for mine, other in ((left, right), (right, left)):
+                    if other in view.keypoints:
+                        keypoints[mine] = view.keypoints[other]
+                    else:
+                        keypoints.pop(mine, None)
+            if group == 'legs' and distances is not None:
+                distances = distances.swapped(LABEL_LEFT_LEG, LABEL_RIGHT_LEG)
+    return replace(view, distances=distances, keypoints=keypoints)

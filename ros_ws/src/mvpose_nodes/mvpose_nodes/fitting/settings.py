@@ -1,0 +1,67 @@
+"""The skeleton fitter's tuning constants in one place, each with its unit, range and reason.
+
+`FitterSettings` is what `SkeletonFitter(settings)` reads; the skeleton_fitter node exposes every field
+as a ROS parameter of the same name (ros/params.py builds the table from this dataclass: description
+and range come from each field's metadata), so a user can see and change them with `ros2 param`.
+The defaults are the values measured on the synthetic studio (docs/method.md).
+"""
+from dataclasses import dataclass, field, fields
+
+
+def setting(default, description, low, high):
+    """A dataclass field with the description and (low, high) range a ROS parameter declares."""
+    return field(default=default, metadata={'description': description, 'range': (low, high)})
+
+
+@dataclass(frozen=True)
+class FitterSettings:
+    # The objective's terms (fitting/stage_search.py; paper 000 Eq. 4-5 and beyond the paper).
+    enclosure_weight: float = setting(
+        1.0, "weight of Eq. 4's 'stay on the part' term against the distance to the part's sides", 0.0, 100.0)
+    outline_weight: float = setting(
+        1 / 9, "per px² of the outline objective's Cauchy cost, per contour pixel", 0.0, 100.0)
+    inside_weight: float = setting(1.0, "per px² of a bone's sample point outside the silhouette", 0.0, 100.0)
+    outline_scale: float = setting(10.0, "[px] scale of the Cauchy loss of an outline point's residual", 0.1, 1000.0)
+    outline_gate: float = setting(
+        20.0, '[px] outline points farther than this from every capsule are left out of a stage', 0.1, 1000.0)
+    boundary_weight: float = setting(
+        0.1, 'per pixel of Eq. 4 (a sum over N = 100 points), against keypoint_weight per keypoint pixel', 0.0, 100.0)
+    keypoint_weight: float = setting(
+        20.0, 'a pixel of keypoint error costs as much as this many px of summed boundary distance (N = 100)',
+        0.0, 1000.0)
+    keypoint_scale: float = setting(
+        30.0, '[px] keypoint errors e cost keypoint_scale·log(1 + e/keypoint_scale): about e when small, growing '
+              'ever slower when large, so a wrong detection pulls little but always leads back', 0.1, 1000.0)
+    smoothness_weight: float = setting(
+        20.0, "cost of moving a parameter by one initial simplex step from the previous frame's value (squared)",
+        0.0, 1e4)
+    limit_weight: float = setting(1e4, 'cost per rad² beyond a joint limit', 0.0, 1e8)
+    # The Nelder-Mead search (paper 000 Sec. 5.1, Eq. 7 coefficients).
+    simplex_tolerance: float = setting(
+        1e-2, '[m or rad] a stage stops when its simplex is this small (1 cm, 0.6°)', 1e-5, 1.0)
+    step_position: float = setting(0.05, '[m] initial simplex size of a position parameter', 1e-4, 1.0)
+    step_angle: float = setting(0.15, '[rad] initial simplex size of an angle parameter', 1e-4, 3.14)
+    max_evaluations_per_parameter: int = setting(
+        150, "a stage's objective evaluations at most, per parameter it searches", 1, 100000)
+    # Initialisation (fitting/initialisation.py; paper 000 Sec. 3.1 and 6, paper 004).
+    time_jump: float = setting(0.5, '[s] a larger gap between frame sets (or going back in time) re-initialises',
+                               0.01, 3600.0)
+    ankle_height: float = setting(0.039, "the ankle's height, as a share of the stature (the template's)", 0.0, 0.2)
+    outlier_rms: float = setting(
+        12.0, '[px] a triangulation worse than this tries leaving one view out', 0.1, 1000.0)
+    length_trust: float = setting(
+        0.35, "measured bone lengths within this share of the template's are believed", 0.0, 1.0)
+    face_evidence: float = setting(
+        0.2, 'the summed (frontness − front skin fraction) towards the cameras needed to trust the face', 0.0, 10.0)
+    # Left and right (fitting/limb_sides.py).
+    travel_yaw_limit_deg: float = setting(
+        45.0, '[deg] a walking torso turned further than this from its direction of travel is turned back',
+        0.0, 180.0)
+    walking_speed: float = setting(
+        0.4, "[m/s] faster than this, the pelvis's direction of travel is the person's forward", 0.0, 10.0)
+    walking_baseline: float = setting(0.4, '[s] over which the direction of travel is measured', 0.04, 10.0)
+    continuity_scale: float = setting(
+        0.5, '[m] turns a difference of squared distances [m²] into left/right evidence [m]', 0.01, 10.0)
+
+
+SETTING_FIELDS = tuple(fields(FitterSettings))

@@ -1,0 +1,218 @@
+"""One stage of the hierarchical search (paper 000 Sec. 5.1): its parameters, evidence, objective and
+Nelder–Mead run.
+
+Each of the six stages (torso, head and neck, left arm, right arm, left leg, right leg) searches its
+own parameters with the rest fixed, minimising its own objective (weights: settings.FitterSettings):
+  - Eq. 4–5 for every bone that has labelled boundaries (torso, head, thighs, shins): the projected
+    bone midway between its part's two sides, summed over the cameras that see them; plus the
+    "stay on the part" term of objective._camera_cost (enclosure_weight);
+  - the outline term (objective.outline_cost, beyond the paper): the stage's bones as capsules
+    explaining the part of each camera's outline that lies nearest to them, and staying inside the
+    silhouette. It sees what the labelled parts cannot: the arms, and the torso's turn about the spine
+    from the widths of shoulders and hips;
+  - the reprojection distance of the joints that the features located in 2D (root, neck, head,
+    elbows, wrists, knees, ankles), robust (keypoint_scale) and weighted by confidence (the paper uses
+    these keypoints for initialisation; the arms have no labelled contour, so for them the skin
+    keypoints are evidence too, as in paper 000 Sec. 3.2);
+  - priors: smoothness towards the stage's start (25 fps) and joint limits.
+Nelder–Mead (Lagarias et al. 1998): SciPy's with its standard coefficients, which are the paper's
+(Eq. 7: ρ = 1, χ = 2, γ = 0.5, σ = 0.5; non-adaptive), stopped by the simplex size (xatol) alone.
+"""
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import minimize
+
+from mvpose_nodes.body.kinematics import BONE_INDEX, BONES, forward_kinematics
+from mvpose_nodes.body.model import (JOINT_INDEX, LABEL_HEAD, LABEL_LEFT_LEG, LABEL_RIGHT_LEG, LABEL_TORSO,
+                                     PARAMETER_INDEX)
+from mvpose_nodes.fitting.objective import (CAPSULE_RADII, TERMINAL_BONES, capsule_residuals, inside_cost, limb_cost,
+                                            outline_cost)
+
+JOINT_LIMITS = {'left_shin_rx': (-2.6, 0.05), 'right_shin_rx': (-2.6, 0.05),     # knees bend backwards,
+                'left_forearm_rx': (-0.05, 2.6), 'right_forearm_rx': (-0.05, 2.6),  # elbows forwards [rad];
+                # the clavicles move little, and no keypoint sees the shoulders: keep them near the rest
+                **{f'{side}_clavicle_{axis}': (-0.5, 0.5) for side in ('left', 'right') for axis in ('ry', 'rz')}}
+KEYPOINT_JOINT = {'root': 'pelvis'}   # 2D keypoint name -> the joint it locates
+
+STAGE_PARAMETERS = {
+    'torso': ('torso_x', 'torso_y', 'torso_z', 'torso_rx', 'torso_ry', 'torso_rz'),
+    'head_neck': ('head_rx', 'head_ry', 'head_rz'),
+    'left_arm': ('left_clavicle_ry', 'left_clavicle_rz', 'left_upper_arm_rx', 'left_upper_arm_ry',
+                 'left_upper_arm_rz', 'left_forearm_rx'),
+    'right_arm': ('right_clavicle_ry', 'right_clavicle_rz', 'right_upper_arm_rx', 'right_upper_arm_ry',
+                  'right_upper_arm_rz', 'right_forearm_rx'),
+    'left_leg': ('left_thigh_rx', 'left_thigh_ry', 'left_thigh_rz', 'left_shin_rx'),
+    'right_leg': ('right_thigh_rx', 'right_thigh_ry', 'right_thigh_rz', 'right_shin_rx'),
+}
+STAGE_BONES = {  # bones with labelled boundaries: (bone, part label)
+    'torso': (('torso', LABEL_TORSO),), 'head_neck': (('head', LABEL_HEAD),), 'left_arm': (), 'right_arm': (),
+    'left_leg': (('left_thigh', LABEL_LEFT_LEG), ('left_shin', LABEL_LEFT_LEG)),
+    'right_leg': (('right_thigh', LABEL_RIGHT_LEG), ('right_shin', LABEL_RIGHT_LEG)),
+}
+STAGE_KEYPOINTS = {
+    # Only the torso's own keypoints: with the limbs' keypoints too, the torso would turn to explain
+    # the limbs' motion since the last frame (their angles are still the last frame's), and drift.
+    'torso': ('root', 'neck', 'head'),
+    'head_neck': ('head',), 'left_arm': ('left_elbow', 'left_wrist'),
+    'right_arm': ('right_elbow', 'right_wrist'), 'left_leg': ('left_knee', 'left_ankle'),
+    'right_leg': ('right_knee', 'right_ankle'),
+}
+STAGE_CAPSULES = {  # bones whose capsules explain the outline in each stage (objective.outline_cost)
+    'torso': ('torso', 'left_hip', 'right_hip', 'left_clavicle', 'right_clavicle'), 'head_neck': ('head',),
+    'left_arm': ('left_clavicle', 'left_upper_arm', 'left_forearm'),
+    'right_arm': ('right_clavicle', 'right_upper_arm', 'right_forearm'),
+    'left_leg': ('left_thigh', 'left_shin'), 'right_leg': ('right_thigh', 'right_shin'),
+}
+CAPSULE_ENDS = np.array([(JOINT_INDEX[bone.parent_joint], JOINT_INDEX[bone.joint]) for bone in BONES])  # (14, 2)
+CAPSULE_RADIUS = np.array([CAPSULE_RADII[bone.name.replace('left_', '').replace('right_', '')] for bone in BONES])
+CAPSULE_TERMINAL = np.array([bone.name.endswith(TERMINAL_BONES) for bone in BONES])
+STAGE_CAPSULE_INDEX = {stage: np.array([BONE_INDEX[name] for name in names]) for stage, names in STAGE_CAPSULES.items()}
+
+
+@dataclass
+class StageResult:
+    name: str
+    cost: float
+    evaluations: int
+    cameras: list
+    fitted: bool
+
+
+def stage_indices(stage):
+    """The indices (into the 29 parameters) that `stage` searches."""
+    return [PARAMETER_INDEX[name] for name in STAGE_PARAMETERS[stage]]
+
+
+def projected_capsules(view, pixels, depth, bones=slice(None)):
+    """The projected capsules of `bones` (indices into BONES; default all) in one view: starts, ends
+    (B, 2) [px], radii (B,) [px] (CAPSULE_RADIUS at the bone's mean depth), from the projected joints
+    pixels (15, 2), depth (15,)."""
+    ends = CAPSULE_ENDS[bones]
+    mean_depth = np.maximum(0.5 * (depth[ends[:, 0]] + depth[ends[:, 1]]), 0.1)
+    return pixels[ends[:, 0]], pixels[ends[:, 1]], CAPSULE_RADIUS[bones] * view.camera.K[0, 0] / mean_depth
+
+
+def has_evidence(stage, views, assigned):
+    """Whether any view has the stage's keypoints, labelled boundaries, or outline points."""
+    return any(name in view.keypoints for view in views for name in STAGE_KEYPOINTS[stage]) or any(
+        view.distances is not None and label in view.distances.widths
+        for view in views for _, label in STAGE_BONES[stage]) or any(
+        points is not None and len(points) for points in assigned)
+
+
+class StageSearch:
+    """The stages' objectives and searches for one person (bone lengths [m] by name) under `settings`
+    (FitterSettings). `new_frame()` before each frame: the keypoint targets are kept per frame."""
+
+    def __init__(self, settings, lengths):
+        self.settings = settings
+        self.lengths = lengths
+        self._targets = {}
+
+    def new_frame(self):
+        self._targets = {}
+
+    def search(self, stage, parameters, views, assigned):
+        """One Nelder–Mead stage over STAGE_PARAMETERS[stage]; (new parameters, StageResult). assigned:
+        per view the outline points the stage explains (outline_assignment)."""
+        settings = self.settings
+        indices = stage_indices(stage)
+        steps = np.array([settings.step_position if name.endswith(('_x', '_y', '_z')) else settings.step_angle
+                          for name in STAGE_PARAMETERS[stage]])
+        if not has_evidence(stage, views, assigned):
+            return parameters, StageResult(stage, 0.0, 0, [], False)
+        trial = parameters.copy()
+        start = parameters[indices]
+        limits = [(i, JOINT_LIMITS[name]) for i, name in enumerate(STAGE_PARAMETERS[stage]) if name in JOINT_LIMITS]
+
+        def cost(values):
+            trial[indices] = values
+            total, _ = self.stage_cost(stage, trial, views, assigned)
+            # Priors: the pose changes little between frames at 25 fps, and joints have limits.
+            total += settings.smoothness_weight * np.sum(((values - start) / steps) ** 2)
+            for i, (low, high) in limits:
+                total += settings.limit_weight * (max(low - values[i], 0.0) + max(values[i] - high, 0.0)) ** 2
+            return total
+        simplex = np.vstack([start, start + np.diag(steps)])
+        result = minimize(cost, start, method='Nelder-Mead', options={
+            'initial_simplex': simplex, 'xatol': settings.simplex_tolerance, 'fatol': np.inf, 'adaptive': False,
+            'maxfev': settings.max_evaluations_per_parameter * len(indices)})
+        fitted = parameters.copy()
+        fitted[indices] = result.x
+        final, used = self.stage_cost(stage, fitted, views, assigned)
+        return fitted, StageResult(stage, float(final), int(result.nfev),
+                                   sorted(views[i].camera.number for i in used), True)
+
+    def outline_assignment(self, stage, parameters, views):
+        """Per view, the outline points (M, 2) [px] that the stage's capsules explain in the pose
+        `parameters`: those nearer to one of them than to any other capsule, within outline_gate (None for
+        a view without an outline). Fixed for the stage's search, so that the torso is not pulled to
+        explain the limbs, which are still where they were in the last frame."""
+        joints, _ = forward_kinematics(parameters, self.lengths)
+        mine = STAGE_CAPSULE_INDEX[stage]
+        assigned = []
+        for view in views:
+            if view.outline is None:
+                assigned.append(None)
+                continue
+            residuals = capsule_residuals(view.outline.points, *projected_capsules(view, *view.camera.project(joints)),
+                                          CAPSULE_TERMINAL)
+            nearest = residuals.argmin(axis=1)
+            keep = np.isin(nearest, mine) & (np.abs(residuals[np.arange(len(nearest)), nearest])
+                                             < self.settings.outline_gate)
+            assigned.append(view.outline.points[keep])
+        return assigned
+
+    def stage_cost(self, stage, parameters, views, assigned=None):
+        """The stage's objective (module docstring) and the indices of the views that contributed;
+        assigned: per view the outline points the stage explains (None: no outline term)."""
+        settings = self.settings
+        joints, _ = forward_kinematics(parameters, self.lengths)
+        projections = [view.camera.project(joints) for view in views]  # every joint, once per camera
+        total, used = 0.0, set()
+        mine = STAGE_CAPSULE_INDEX[stage]
+        points, capsules = [], []   # the outline points of all views at once: one vectorised evaluation
+        for index, (view, (pixels, depth)) in enumerate(zip(views, projections)):
+            if assigned is None or assigned[index] is None or depth[CAPSULE_ENDS[mine]].min() <= 0:
+                continue
+            starts, ends, radii = projected_capsules(view, pixels, depth, mine)
+            total += settings.inside_weight * inside_cost(starts, ends, view.outline)
+            points.append(assigned[index])
+            capsules.append(np.broadcast_to(np.column_stack([starts, ends, radii]), (len(assigned[index]), len(mine), 5)))
+            used.add(index)
+        if points:
+            capsules = np.concatenate(capsules)
+            total += settings.outline_weight * outline_cost(
+                np.concatenate(points), capsules[..., 0:2], capsules[..., 2:4], capsules[..., 4],
+                CAPSULE_TERMINAL[mine], settings.outline_scale, settings.outline_gate)
+        for bone_name, label in STAGE_BONES[stage]:
+            bone = BONES[BONE_INDEX[bone_name]]
+            ends = (JOINT_INDEX[bone.parent_joint], JOINT_INDEX[bone.joint])
+            segments = [(pixels[ends[0]], pixels[ends[1]]) if depth[list(ends)].min() > 0 and view.distances else None
+                        for view, (pixels, depth) in zip(views, projections)]
+            cost, cameras = limb_cost(segments, [view.distances for view in views], label,
+                                      enclosure_weight=settings.enclosure_weight)
+            total += settings.boundary_weight * cost
+            used.update(cameras)
+        for index, joint_indices, observed, weights in self.keypoint_targets(stage, views):
+            errors = np.linalg.norm(projections[index][0][joint_indices] - observed, axis=1)
+            total += settings.keypoint_weight * settings.keypoint_scale * float(
+                weights @ np.log1p(errors / settings.keypoint_scale))
+            used.add(index)
+        return total, used
+
+    def keypoint_targets(self, stage, views):
+        """[(view index, joint indices (K,), keypoints (K, 2) [px], confidences (K,))] of the stage's
+        keypoints in each view that has some; worked out once per stage and frame (`views` is the
+        frame's list), since the search evaluates the cost hundreds of times."""
+        key = (stage, id(views))
+        if key not in self._targets:
+            self._targets[key] = []
+            for index, view in enumerate(views):
+                names = [n for n in STAGE_KEYPOINTS[stage] if n in view.keypoints]
+                if names:
+                    values = np.array([view.keypoints[n] for n in names], dtype=float)
+                    self._targets[key].append((index, [JOINT_INDEX[KEYPOINT_JOINT.get(n, n)] for n in names],
+                                               values[:, :2], values[:, 2]))
+        return self._targets[key]
