@@ -6,7 +6,7 @@ import pytest
 from mvpose_nodes.body.model import JOINT_NAMES
 from mvpose_nodes.body.camera import studio_rig
 from mvpose_nodes.markers.triangulation import triangulate_markers
-from mvpose_nodes.markers.tracking import FLAG_DETECTED, FLAG_LOST, FLAG_PREDICTED
+from mvpose_nodes.markers.detection import FLAG_DETECTED, FLAG_LOST, FLAG_PREDICTED
 from mvpose_nodes.app.markers import errors_and_swaps, swap_events
 from mvpose_nodes.studio.mocap import cmu_clip, load_bvh, retarget
 

@@ -6,7 +6,7 @@ import pytest
 
 from mvpose_nodes.body.camera import studio_rig
 from mvpose_nodes.markers.views import LIMB_PARENT, MarkerViews
-from mvpose_nodes.markers.tracking import FLAG_DETECTED, FLAG_PREDICTED, MARKER_NAMES
+from mvpose_nodes.markers.detection import FLAG_DETECTED, FLAG_PREDICTED, MARKER_NAMES
 from mvpose_nodes.studio.mocap import cmu_clip, load_bvh, retarget
 
 WRIST, OTHER_WRIST = MARKER_NAMES.index('left_wrist'), MARKER_NAMES.index('right_wrist')

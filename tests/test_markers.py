@@ -6,9 +6,10 @@ import cv2
 import numpy as np
 import pytest
 
-from mvpose_nodes.markers.tracking import (FLAG_DETECTED, FLAG_LOST, FLAG_PREDICTED, MARKER_NAMES, REGIONS, MarkerSettings,
-                                  MarkerTracker, NearestNeighbourTracker, RegionTracker, assign_group, assign_head,
-                                  detect_markers, similarity_complete)
+from mvpose_nodes.markers.detection import (FLAG_DETECTED, FLAG_LOST, FLAG_PREDICTED, MARKER_NAMES, REGIONS,
+                                            MarkerSettings, detect_markers)
+from mvpose_nodes.markers.regions import RegionTracker, assign_group, assign_head, similarity_complete
+from mvpose_nodes.markers.tracking import MarkerTracker, NearestNeighbourTracker
 
 BLUE = (30, 40, 200)
 RED = (220, 20, 25)
@@ -386,7 +387,7 @@ def test_region_motion_is_checked_against_its_markers():
     tracker = MarkerTracker()
     rng = np.random.default_rng(4)
     tracker.positions = rng.uniform(100, 300, (15, 2))
-    from mvpose_nodes.markers.tracking import REGION_INDICES
+    from mvpose_nodes.markers.detection import REGION_INDICES
     hips = list(REGION_INDICES['hips'])
     tracker.box_sizes = {'hips': np.array([1.0, 1.0])}
     tracker.trackers = {'hips': SimpleNamespace(size=np.array([60.0, 40.0]))}   # gate (60 + 40) / 4 = 25 px

@@ -1,15 +1,17 @@
-"""The demo's evaluation pictures (report_pictures): error plot (paper 000 Fig. 12), contact sheet
+"""The demo's evaluation pictures (app/reports): error plot (paper 000 Fig. 12), contact sheet
 (Fig. 10) and the skeleton animation, read back and checked pixel by pixel where it matters."""
 import numpy as np
 import cv2
 import pytest
 
-from mvpose_nodes.app.reports import pictures
+from mvpose_nodes.app.reports import animation as animation_module
 from mvpose_nodes.body.model import PARAMETER_NAMES
 from mvpose_nodes.body.camera import studio_rig
 from mvpose_nodes.body.kinematics import J, P, bone_lengths, forward_kinematics
-from mvpose_nodes.app.reports.pictures import (COLOURS, JOINT_DOT, NO_IMAGE_GREY, animation, contact_sheet, draw_skeleton,
-                                          error_plot)
+from mvpose_nodes.app.reports.animation import animation
+from mvpose_nodes.app.reports.drawing import COLOURS, JOINT_DOT, draw_skeleton
+from mvpose_nodes.app.reports.plots import error_plot
+from mvpose_nodes.app.reports.sheets import NO_IMAGE_GREY, contact_sheet
 
 BLUE = (30, 60, 200)  # RGB of the test images
 
@@ -178,7 +180,7 @@ def test_animation_falls_back_to_a_png_strip_without_mp4(tmp_path, monkeypatch):
         def release(self):
             pass
 
-    monkeypatch.setattr(pictures.cv2, 'VideoWriter', NoVideo)
+    monkeypatch.setattr(animation_module.cv2, 'VideoWriter', NoVideo)
     path = animation(walk(20), tmp_path / 'walk.mp4')
     assert path == tmp_path / 'walk.png' and not (tmp_path / 'walk.mp4').exists()
     strip = read_rgb(path)
@@ -186,7 +188,7 @@ def test_animation_falls_back_to_a_png_strip_without_mp4(tmp_path, monkeypatch):
 
 
 def test_marker_sheet_draws_estimates_by_flag_and_joins_the_ones_off(tmp_path):
-    from mvpose_nodes.app.reports.pictures import MARKER_FLAG_COLOURS, marker_label, marker_sheet
+    from mvpose_nodes.app.reports.sheets import MARKER_FLAG_COLOURS, marker_label, marker_sheet
     rng = np.random.default_rng(3)
     truth = rng.uniform(100, 500, (15, 2))
     estimate, flags = truth.copy(), np.zeros(15, np.uint8)

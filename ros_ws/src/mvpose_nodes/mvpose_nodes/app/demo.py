@@ -93,7 +93,9 @@ def evaluate_and_draw(bag, run, output, used_cameras):
     from mvpose_nodes.body.camera import studio_rig
     from mvpose_nodes.ros.camera_bag import frame_number_of, frame_sets
     from mvpose_nodes.app.fit import report
-    from mvpose_nodes.app.reports.pictures import animation, contact_sheet, error_plot
+    from mvpose_nodes.app.reports.animation import animation
+    from mvpose_nodes.app.reports.plots import error_plot
+    from mvpose_nodes.app.reports.sheets import contact_sheet
     from mvpose_nodes.ros.conversions import joints_from_skeleton
     pictures = {}
     stamps = sorted(run.fitted)

@@ -148,9 +148,9 @@ def report(bag, results, camera_of, truth_3d, names, fused_3d):
 
 
 def draw_frames(directory, sets, runs):
-    """The fused tracks drawn over every camera (report_pictures.marker_sheet) at the frame with the most
+    """The fused tracks drawn over every camera (reports.sheets.marker_sheet) at the frame with the most
     hidden markers and at the frame with the largest mean error; the paths written."""
-    from mvpose_nodes.app.reports.pictures import marker_sheet
+    from mvpose_nodes.app.reports.sheets import marker_sheet
     cameras = sorted(runs)
     errors = np.mean([errors_and_swaps(runs[k])[0] for k in cameras], axis=(0, 2))       # (F,)
     hidden = np.sum([[~r[3] for r in runs[k]] for k in cameras], axis=(0, 2))          # (F,)

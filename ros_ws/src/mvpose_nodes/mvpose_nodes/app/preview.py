@@ -10,7 +10,7 @@ import numpy as np
 
 from mvpose_nodes.ros.camera_bag import GROUND_TRUTH_TOPIC
 from mvpose_nodes.tools.cli import ArgumentParser, UserError, exit_on_user_error
-from mvpose_nodes.app.reports.pictures import draw_skeleton  # the project's one skeleton drawing function
+from mvpose_nodes.app.reports.drawing import draw_skeleton  # the project's one skeleton drawing function
 
 TILE_WIDTH = 640  # [px] of each camera's tile in the sheet
 

@@ -2,7 +2,7 @@
 cameras triangulated into the 15 joints, each marker from the cameras that detected it."""
 import numpy as np
 
-from mvpose_nodes.markers.tracking import FLAG_DETECTED, FLAG_LOST
+from mvpose_nodes.markers.detection import FLAG_DETECTED, FLAG_LOST
 from mvpose_nodes.body.triangulation import triangulate
 
 

@@ -40,8 +40,9 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from mvpose_nodes.markers.tracking import FLAG_DETECTED, FLAG_LOST, FLAG_PREDICTED, MARKER_NAMES, REGION_INDICES, \
-    MarkerTracker, gated_assignment
+from mvpose_nodes.markers.detection import FLAG_DETECTED, FLAG_LOST, FLAG_PREDICTED, MARKER_NAMES, REGION_INDICES
+from mvpose_nodes.markers.regions import UNASSIGNABLE, gated_assignment
+from mvpose_nodes.markers.tracking import MarkerTracker
 from mvpose_nodes.body.triangulation import dlt_point, triangulate
 
 # The region whose motion carries each region marker when it cannot be triangulated: its own region,
@@ -55,7 +56,6 @@ LIMB_PARENT = {MARKER_NAMES.index(child): MARKER_NAMES.index(parent) for child, 
     ('right_knee', 'right_hip'), ('left_wrist', 'left_elbow'), ('right_wrist', 'right_elbow'),
     ('left_ankle', 'left_knee'), ('right_ankle', 'right_knee'))}
 LIMB_MARKERS = tuple(LIMB_PARENT)
-_BIG = 1e9
 
 
 @dataclass(frozen=True)
@@ -300,7 +300,7 @@ class MarkerViews:
         candidates = self._unclaimed_points(unclaimed)
         if not len(markers):
             return
-        cost = np.full((len(markers), len(candidates)), _BIG)
+        cost = np.full((len(markers), len(candidates)), UNASSIGNABLE)
         for row, marker in enumerate(markers):
             parent = points[LIMB_PARENT[marker]] if marker in LIMB_PARENT else None
             gate = min(s.reacquire_gate_m, s.blob_gate_m + s.reacquire_growth_m * self.unsupported_run[marker])
@@ -313,7 +313,7 @@ class MarkerViews:
         used, taken = set(), set()
         for row, column in (sorted(zip(*linear_sum_assignment(cost)), key=lambda pair: cost[pair]) if candidates else ()):
             views = candidates[column][1]
-            if cost[row, column] >= _BIG or any((c, i) in used for c, i in views.items()):
+            if cost[row, column] >= UNASSIGNABLE or any((c, i) in used for c, i in views.items()):
                 continue
             used.update(views.items())
             taken.add(markers[row])
@@ -333,7 +333,7 @@ class MarkerViews:
         if not lost or not blobs:
             return
         rays = {c: self._rays(c, unclaimed[c]) for c in {c for c, _ in blobs}}
-        cost = np.full((len(lost), len(blobs)), _BIG)
+        cost = np.full((len(lost), len(blobs)), UNASSIGNABLE)
         for row, marker in enumerate(lost):
             parent = points[LIMB_PARENT[marker]]
             for column, (c, i) in enumerate(blobs):
@@ -341,7 +341,7 @@ class MarkerViews:
                 if self._near_shell(marker, point, parent, self.settings.bone_tolerance_m + 1e-9):
                     cost[row, column] = np.linalg.norm(point - points[marker])
         for row, column in zip(*linear_sum_assignment(cost)):
-            if cost[row, column] < _BIG:
+            if cost[row, column] < UNASSIGNABLE:
                 c, i = blobs[column]
                 observed[c, lost[row]] = unclaimed[c][i]
                 detected[c, lost[row]] = True

@@ -17,7 +17,7 @@ from visualization_msgs.msg import MarkerArray
 
 from mvpose_nodes.body.model import JOINT_NAMES
 from mvpose_nodes.markers.views import MarkerViews
-from mvpose_nodes.markers.tracking import FLAG_LOST
+from mvpose_nodes.markers.detection import FLAG_LOST
 from mvpose_nodes.ros.multi_camera import MultiCameraNode
 from mvpose_nodes.ros.conversions import blobs_from_message, marker_tracks, skeleton_markers, skeleton_message, \
     tracks_from_message

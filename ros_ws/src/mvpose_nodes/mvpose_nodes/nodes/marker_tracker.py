@@ -24,7 +24,8 @@ from rclpy.node import Node
 from sensor_msgs.msg import CompressedImage, Image
 
 from mvpose_nodes.tools.cli import UserError
-from mvpose_nodes.markers.tracking import FLAG_LOST, MarkerTracker, NearestNeighbourTracker
+from mvpose_nodes.markers.detection import FLAG_LOST
+from mvpose_nodes.markers.tracking import MarkerTracker, NearestNeighbourTracker
 from mvpose_nodes.ros.conversions import ImageError, colour_image, marker_tracks, stamp_ns, tracks_from_message
 from mvpose_nodes.ros.helpers import ReportOnce, camera_of_namespace, run_node
 

@@ -1,43 +1,52 @@
-"""Start the processes of a launch YAML file and supervise them (a small stand-in for `ros2 launch`).
+"""Start the processes of a ros2 launch YAML file and supervise them (a stand-in for `ros2 launch`).
 
-Run as `./mvpose launch FILE.yaml` (or the `launch` executable). The file lists the processes to start:
+Run as `./mvpose launch FILE [NAME:=VALUE...]` or `./mvpose launch PACKAGE FILE [NAME:=VALUE...]`
+(FILE then found in PACKAGE's share directory, as `ros2 launch` finds it); NAME:=VALUE sets launch
+argument NAME. The file is in ros2 launch's YAML format, of which this subset is read (docs/launch.md):
 
-  nodes:
-    - name: camera_features        # required: the node name; namespace/name is unique and prefixes its output
-      executable: camera_features  # a console script of `package` (PREFIX/lib/PACKAGE/NAME, as `ros2 run`)
-      package: mvpose_nodes        # optional, default mvpose_nodes
-      namespace: /cam3             # optional
-      parameters:                  # optional: params files (relative to this file's folder) and mappings
-        - ../config/camera_features.yaml
-        - {publish_overlay: false, cameras: [3, 5, 7]}
-      remappings: {image: image_raw}   # optional: from: to
-      arguments: [--verbose]       # optional: extra arguments, placed before --ros-args
-      required: true               # optional, default false: when it ends (any code), stop all the others
-    - name: player
-      cmd: [bag, play, bags/x]     # instead of executable: a plain command, no --ros-args added; its first
-      required: true               # word is a mvpose_nodes executable if one has that name, else a program on PATH
+  launch:
+    - arg: {name: camera_a, default: '3', description: first camera}
+    - node:
+        pkg: mvpose_nodes                # the package, and its executable (PREFIX/lib/PKG/EXEC)
+        exec: camera_features
+        name: camera_features            # required here; namespace/name is unique and prefixes the output
+        namespace: /cam$(var camera_a)   # optional
+        param:                           # optional: params files and name/value pairs
+          - from: $(find-pkg-share mvpose_nodes)/config/camera_features.yaml
+          - {name: cameras, value: [$(var camera_a), '5', '7']}
+        remap: [{from: image, to: image_raw}]   # optional
+        args: --verbose                  # optional: extra arguments, placed before --ros-args
+        output: screen                   # optional: screen or both (all output is printed anyway)
+        on_exit: shutdown                # optional: when it ends (any code), stop all the others
+    - executable:
+        name: player
+        cmd: bag play bags/x             # a plain command line, no --ros-args added; its first word is
+        on_exit: shutdown                # a mvpose_nodes executable if one has that name, else on PATH
 
-An `executable` entry runs, in this order:
+Substitutions: $(var NAME [DEFAULT]), $(env NAME [DEFAULT]), $(find-pkg-share PKG), $(find-pkg-prefix PKG),
+$(exec-in-pkg EXEC PKG), $(dirname). A node runs, in this order:
 
-  EXECUTABLE ARGUMENTS... --ros-args -r __node:=NAME [-r __ns:=NAMESPACE]
-      [--params-file FILE | -p KEY:=VALUE]... (in `parameters` order) [-r FROM:=TO]...
+  EXEC ARGS... --ros-args -r __node:=NAME [-r __ns:=NAMESPACE]
+      [--params-file FILE | -p NAME:=VALUE]... (in `param` order) [-r FROM:=TO]...
 
-with inline values written as compact YAML (-p cameras:=[3, 5, 7]). Paths inside `cmd` and
-`arguments` are passed as written, so relative ones resolve against the current directory.
-The whole file is checked before anything starts; --dry-run prints the command lines instead.
+with values written as compact YAML (-p cameras:=[3, 5, 7]). Relative paths resolve against the current
+directory. The whole file is checked before anything starts (any other key is a one-line error naming
+it and its place); --dry-run prints the command lines instead, --show-args the launch arguments.
 
 Each process gets its own session (so a terminal Ctrl-C reaches only the launcher), the launcher's
 environment plus PYTHONUNBUFFERED=1, and its stdout and stderr merged and printed as `[NAME] line`.
-On Ctrl-C or SIGTERM to the launcher, or when a required process ends, the launcher sends SIGINT to
-the processes still running, SIGTERM after --sigint-timeout seconds, SIGKILL after --sigterm-timeout more.
-A negative code in `[launch] NAME exited with code C` means the process was ended by signal -C.
+On Ctrl-C or SIGTERM to the launcher, or when a process with on_exit: shutdown ends, the launcher sends
+SIGINT to the processes still running, SIGTERM after --sigint-timeout seconds, SIGKILL after
+--sigterm-timeout more. A negative code in `[launch] NAME exited with code C` means the process was
+ended by signal -C.
 
 Exit codes:
   0      every process ended with code 0, or SIGTERM to the launcher and all stopped on SIGINT
-  1      a process ended with a non-zero code and none was required, or after Ctrl-C or SIGTERM
-         some process did not stop within --sigint-timeout and needed SIGTERM or SIGKILL
+  1      a process ended with a non-zero code and none had on_exit: shutdown, or after Ctrl-C or
+         SIGTERM some process did not stop within --sigint-timeout and needed SIGTERM or SIGKILL
   2      bad launch file or command line (nothing was started)
-  100+K  the required process at position K (1-based, in file order) ended; the others were stopped
+  100+K  the on_exit: shutdown process at position K (1-based, counting the file's nodes and
+         executables in order) ended; the others were stopped
   130    Ctrl-C, and every process stopped on SIGINT within --sigint-timeout
 """
 import argparse
@@ -46,166 +55,24 @@ import ctypes
 import math
 import os
 import shlex
-import shutil
 import signal
 import subprocess
 import sys
 import threading
 import time
-from dataclasses import dataclass
 from pathlib import Path
 
-import yaml
+from mvpose_nodes.tools.cli import ArgumentParser, exit_on_user_error, UserError, without_ros_args
+from mvpose_nodes.tools.launch_file import (  # noqa: F401 (the launcher's API, for its users)
+    DEFAULT_PACKAGE, ProcessSpec, declared_arguments, load_launch_file, package_executable,
+    package_launch_file, process_specs, yaml_value)
 
-from mvpose_nodes.tools.cli import ArgumentParser, exit_on_user_error, UserError
-
-DEFAULT_PACKAGE = 'mvpose_nodes'
-NODE_KEYS = ('name', 'executable', 'cmd', 'package', 'namespace', 'parameters', 'remappings', 'arguments',
-             'required')
-EXECUTABLE_ONLY_KEYS = ('package', 'namespace', 'parameters', 'remappings', 'arguments')
 EXIT_PROCESS_FAILED = 1  # also: stopping needed more than SIGINT
 EXIT_REQUIRED_ENDED = 100  # + the 1-based position of the required process
 EXIT_INTERRUPTED = 130
 POLL_INTERVAL = 0.05  # seconds between looks at the children: short enough that reactions feel immediate
 PR_SET_PDEATHSIG = 1     # linux/prctl.h
 DRAIN_TIMEOUT = 1.0  # a grandchild may hold an ended child's output pipe open; don't wait for it for ever
-
-
-@dataclass
-class ProcessSpec:
-    """One checked entry of a launch description: what to run and whether its end stops the launch."""
-    name: str
-    command: list
-    required: bool = False
-
-
-def package_executable(package, name):
-    """Where `ros2 run PACKAGE NAME` finds NAME (PREFIX/lib/PACKAGE/NAME, PREFIX in AMENT_PREFIX_PATH), or None."""
-    for prefix in filter(None, os.environ.get('AMENT_PREFIX_PATH', '').split(os.pathsep)):
-        candidate = Path(prefix, 'lib', package, name)
-        if candidate.is_file() and os.access(candidate, os.X_OK):
-            return candidate
-    return None
-
-
-def yaml_value(value):
-    """VALUE of `-p KEY:=VALUE`: compact YAML, which is how ROS reads it ([3, 5, 7], true, 'true')."""
-    return yaml.safe_dump(value, default_flow_style=True, width=math.inf).strip().removesuffix('\n...')
-
-
-def load_launch_file(path):
-    """The checked process specs of launch YAML file `path`; a one-line UserError for any mistake in it."""
-    path = Path(path)
-    try:
-        document = yaml.safe_load(path.read_text())
-    except FileNotFoundError:
-        raise UserError(f'{path}: file not found') from None
-    except OSError as error:
-        raise UserError(f'{path}: cannot read: {error.strerror}') from None
-    except yaml.YAMLError as error:
-        mark = getattr(error, 'problem_mark', None)
-        where = f' (line {mark.line + 1}: {error.problem})' if mark else ''
-        raise UserError(f'{path}: not valid YAML{where}') from None
-    if not isinstance(document, dict) or set(document) != {'nodes'}:
-        raise UserError(f"{path}: expected a mapping with just a 'nodes' list (see --help)")
-    return process_specs(document['nodes'], path.parent, source=str(path))
-
-
-def process_specs(entries, base_dir='.', source='launch description'):
-    """Check launch entries (dicts, as in a launch file's `nodes` list) and build their command lines.
-
-    Relative params-file paths resolve against base_dir. Errors name `source` and the entry."""
-    if not isinstance(entries, list) or not entries:
-        raise UserError(f"{source}: 'nodes' must be a non-empty list of node entries")
-    specs = []
-    for position, entry in enumerate(entries, 1):
-        name = entry.get('name') if isinstance(entry, dict) else None
-        label = f"node '{name}'" if isinstance(name, str) and name else f'node #{position}'
-        try:
-            spec = _process_spec(entry, Path(base_dir))
-            if spec.name in (earlier.name for earlier in specs):
-                raise UserError('duplicate name')
-        except UserError as error:
-            raise UserError(f'{source}: {label}: {error}') from None
-        specs.append(spec)
-    return specs
-
-
-def _process_spec(entry, base_dir):
-    if not isinstance(entry, dict):
-        raise UserError("must be a mapping with a 'name' and an 'executable' or a 'cmd'")
-    unknown = [str(key) for key in entry if key not in NODE_KEYS]
-    if unknown:
-        raise UserError(f"unknown key '{unknown[0]}' (known: {', '.join(NODE_KEYS)})")
-    name = entry.get('name')
-    if not isinstance(name, str) or not name:
-        raise UserError("needs a 'name' (a non-empty string)")
-    required = entry.get('required', False)
-    if not isinstance(required, bool):
-        raise UserError("'required' must be true or false")
-    if ('executable' in entry) == ('cmd' in entry):
-        raise UserError("needs exactly one of 'executable' and 'cmd'")
-    if 'cmd' in entry:
-        misplaced = [key for key in EXECUTABLE_ONLY_KEYS if key in entry]
-        if misplaced:
-            raise UserError(f"'{misplaced[0]}' goes with 'executable', not with 'cmd'")
-        command = _words(entry['cmd'], 'cmd')
-        if not command:
-            raise UserError("'cmd' is empty")
-        return ProcessSpec(name, [_program_path(command[0]), *command[1:]], required)
-
-    package, executable = entry.get('package', DEFAULT_PACKAGE), entry['executable']
-    if not isinstance(package, str) or not isinstance(executable, str) or '/' in executable:
-        raise UserError("'executable' and 'package' must be names, e.g. executable: camera_features")
-    path = package_executable(package, executable)
-    if path is None:
-        raise UserError(f"no executable '{executable}' in package {package}")
-    command = [str(path), *_words(entry.get('arguments', []), 'arguments'), '--ros-args', '-r', f'__node:={name}']
-    namespace = entry.get('namespace')
-    if namespace is not None:
-        if not isinstance(namespace, str) or not namespace.startswith('/'):
-            raise UserError("'namespace' must start with '/', e.g. /cam3")
-        command += ['-r', f'__ns:={namespace}']
-        name = f"{namespace.rstrip('/')}/{name}"  # the node's full name: unique where the plain name need not be
-    command += _parameter_arguments(entry.get('parameters', []), base_dir)
-    remappings = entry.get('remappings', {})
-    if not isinstance(remappings, dict):
-        raise UserError("'remappings' must be a mapping of from: to")
-    for original, replacement in remappings.items():
-        command += ['-r', f'{original}:={replacement}']
-    return ProcessSpec(name, command, required)
-
-
-def _words(value, key):
-    if not isinstance(value, list) or not all(isinstance(word, (str, int, float)) for word in value):
-        raise UserError(f"'{key}' must be a list of words, e.g. [--verbose]")
-    return [word if isinstance(word, str) else yaml_value(word) for word in value]  # true stays true, not True
-
-
-def _program_path(word):
-    """The program a `cmd` starts with: a mvpose_nodes executable of that name, else one on PATH (or a path)."""
-    found = ('/' not in word and package_executable(DEFAULT_PACKAGE, word)) or shutil.which(word)
-    if not found:
-        raise UserError(f"command not found: '{word}' (not an executable of {DEFAULT_PACKAGE}, not on PATH)")
-    return str(found)
-
-
-def _parameter_arguments(parameters, base_dir):
-    if not isinstance(parameters, list):
-        raise UserError("'parameters' must be a list of params-file paths and mappings")
-    arguments = []
-    for item in parameters:
-        if isinstance(item, str):
-            path = (base_dir / item).resolve()
-            if not path.is_file():
-                raise UserError(f'parameters file not found: {path}')
-            arguments += ['--params-file', str(path)]
-        elif isinstance(item, dict):
-            for key, value in item.items():
-                arguments += ['-p', f'{key}:={yaml_value(value)}']
-        else:
-            raise UserError("'parameters' items must be params-file paths or mappings of name: value")
-    return arguments
 
 
 def _end_with_parent():
@@ -217,7 +84,7 @@ def _end_with_parent():
 class Launch:
     """Runs process specs (from load_launch_file or process_specs) and supervises them.
 
-        with Launch(load_launch_file('launch/demo.yaml')) as launch:   # start()
+        with Launch(load_launch_file('launch/demo.launch.yaml', {'camera_a': '2'})) as launch:   # start()
             code = launch.wait(timeout=30)   # the exit code once it is over, None if still running
         # leaving the block stop()s whatever still runs
 
@@ -348,10 +215,14 @@ def seconds(text):
 
 def build_parser(prog):
     parser = ArgumentParser(prog=prog, description=__doc__.split('\n', 1)[0], epilog=__doc__.split('\n\n', 1)[1],
+                            usage='%(prog)s [options] [PACKAGE] FILE [NAME:=VALUE ...]',
                             formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument('file', type=Path, metavar='FILE.yaml', help='the launch file')
+    parser.add_argument('words', nargs='+', metavar='[PACKAGE] FILE [NAME:=VALUE ...]',
+                        help="the launch file (or a package and its launch file's name), then launch arguments")
     parser.add_argument('--dry-run', action='store_true',
                         help='print the command line of every process and exit without starting any')
+    parser.add_argument('-s', '--show-args', action='store_true',
+                        help="print the launch file's arguments (name, description, default) and exit")
     parser.add_argument('--sigint-timeout', type=seconds, default=5.0, metavar='S',
                         help='seconds to wait after SIGINT before sending SIGTERM (default 5)')
     parser.add_argument('--sigterm-timeout', type=seconds, default=5.0, metavar='S',
@@ -359,10 +230,42 @@ def build_parser(prog):
     return parser
 
 
+def launch_file_and_arguments(words):
+    """(launch file path, {argument: value}) from the command line's words, read as `ros2 launch` reads
+    them: FILE [NAME:=VALUE...], or PACKAGE FILE [NAME:=VALUE...] when the second word is no NAME:=VALUE."""
+    if len(words) > 1 and ':=' not in words[1]:
+        path, rest = package_launch_file(words[0], words[1]), words[2:]
+    else:
+        path, rest = Path(words[0]), words[1:]
+    arguments = {}
+    for word in rest:
+        name, assigns, value = word.partition(':=')
+        if not assigns or not name:
+            raise UserError(f"expected a launch argument as NAME:=VALUE, got '{word}'")
+        arguments[name] = value
+    return path, arguments
+
+
+def show_arguments(path):
+    arguments = declared_arguments(path)
+    if not arguments:
+        print(f'{path} declares no launch arguments')
+    else:
+        print("Arguments (pass arguments as '<name>:=<value>'):")
+    for argument in arguments:
+        print(f"\n    '{argument.name}':\n        {argument.description or 'no description given'}")
+        if argument.default is not None:
+            print(f"        (default: '{argument.default}')")
+
+
 def main(argv=None, prog='launch'):
-    args = build_parser(prog).parse_args(sys.argv[1:] if argv is None else argv)
+    args = build_parser(prog).parse_intermixed_args(without_ros_args(sys.argv[1:] if argv is None else argv))
     with exit_on_user_error(prog):
-        specs = load_launch_file(args.file)
+        path, arguments = launch_file_and_arguments(args.words)
+        if args.show_args:
+            show_arguments(path)
+            return 0
+        specs = load_launch_file(path, arguments)
         if args.dry_run:
             for spec in specs:
                 print(f'[{spec.name}] {shlex.join(spec.command)}')
