@@ -13,7 +13,7 @@ from rclpy.serialization import serialize_message
 from mvpose_msgs.msg import Skeleton
 from mvpose_nodes.io.bagfile import BagWriter
 from mvpose_nodes.body.model import BONES, JOINT_NAMES, PARAMETER_NAMES
-from mvpose_nodes.body.kinematics import J, P, bone_lengths, euler_matrix, forward_kinematics
+from mvpose_nodes.body.kinematics import JOINT_INDEX, PARAMETER_INDEX, bone_lengths, euler_matrix, forward_kinematics
 from mvpose_nodes.studio.mocap import BVH_TO_WORLD, cmu_clip, elementary_rotations, load_bvh, retarget
 from mvpose_nodes.io.motion_export import (STATUS_NAMES, Motion, read_bvh, write_csv, write_json, write_motion)
 from mvpose_nodes.ros.conversions import skeleton_message
@@ -28,9 +28,9 @@ def random_model_motion(rng, frames, height=1.75, max_ry=np.pi):
     parameters = rng.uniform(-np.pi, np.pi, (frames, len(PARAMETER_NAMES)))
     for name in PARAMETER_NAMES:
         if name.endswith('_ry'):
-            parameters[:, P[name]] = rng.uniform(-max_ry, max_ry, frames)
-    parameters[:, [P['torso_x'], P['torso_y']]] = rng.uniform(-2, 2, (frames, 2))
-    parameters[:, P['torso_z']] = rng.uniform(0.8, 1.0, frames)
+            parameters[:, PARAMETER_INDEX[name]] = rng.uniform(-max_ry, max_ry, frames)
+    parameters[:, [PARAMETER_INDEX['torso_x'], PARAMETER_INDEX['torso_y']]] = rng.uniform(-2, 2, (frames, 2))
+    parameters[:, PARAMETER_INDEX['torso_z']] = rng.uniform(0.8, 1.0, frames)
     lengths = bone_lengths(height)
     return parameters, np.array([forward_kinematics(p, lengths)[0] for p in parameters])
 
@@ -83,7 +83,7 @@ def test_bvh_hierarchy_channels_and_axes(tmp_path):
     assert bvh.channels[0] == ('Xposition', 'Yposition', 'Zposition', 'Yrotation', 'Zrotation', 'Xrotation')
     assert all(channels == ('Yrotation', 'Zrotation', 'Xrotation') for name, channels in
                zip(bvh.names[1:], bvh.channels[1:]) if not name.endswith('_end'))
-    np.testing.assert_allclose(bvh.motion[:, :3], joints[:, J['pelvis']][:, [0, 2, 1]] * [1, 1, -1], atol=1e-9)
+    np.testing.assert_allclose(bvh.motion[:, :3], joints[:, JOINT_INDEX['pelvis']][:, [0, 2, 1]] * [1, 1, -1], atol=1e-9)
 
     columns, column = {}, 0
     for name, channels in zip(bvh.names, bvh.channels):
@@ -98,7 +98,7 @@ def test_bvh_hierarchy_channels_and_axes(tmp_path):
             return bvh.motion[frame, columns[name]]
 
         def expected(*names):  # (rz, −ry, rx) [deg] of the named (rx, ry, rz), None = 0
-            rx, ry, rz = (parameters[frame, P[n]] if n else 0.0 for n in names)
+            rx, ry, rz = (parameters[frame, PARAMETER_INDEX[n]] if n else 0.0 for n in names)
             return np.degrees([rz, -ry, rx])
         for side in ('left', 'right'):
             for bone, names in ((f'{side}_thigh', (f'{side}_thigh_rx', f'{side}_thigh_ry', f'{side}_thigh_rz')),
@@ -111,8 +111,8 @@ def test_bvh_hierarchy_channels_and_axes(tmp_path):
             y, z, x = channels(f'{side}_upper_arm')
             local = (elementary_rotations('Y', [y]) @ elementary_rotations('Z', [z])
                      @ elementary_rotations('X', [x]))[0]
-            clavicle = euler_matrix(0.0, *parameters[frame, [P[f'{side}_clavicle_ry'], P[f'{side}_clavicle_rz']]])
-            upper_arm = euler_matrix(*parameters[frame, [P[f'{side}_upper_arm_r{a}'] for a in 'xyz']])
+            clavicle = euler_matrix(0.0, *parameters[frame, [PARAMETER_INDEX[f'{side}_clavicle_ry'], PARAMETER_INDEX[f'{side}_clavicle_rz']]])
+            upper_arm = euler_matrix(*parameters[frame, [PARAMETER_INDEX[f'{side}_upper_arm_r{a}'] for a in 'xyz']])
             np.testing.assert_allclose(BVH_TO_WORLD @ local @ BVH_TO_WORLD.T, clavicle.T @ upper_arm, atol=1e-8)
         for bone in ('torso', 'head'):
             assert np.allclose(degrees(channels(bone) - expected(*(f'{bone}_r{a}' for a in 'xyz'))), 0, atol=1e-6)
@@ -142,15 +142,15 @@ def test_bvh_of_a_mocap_walk_keeps_every_bone_direction(tmp_path):
     path = tmp_path / 'walk.bvh'
     write_motion(motion_of(joints), path, 'bvh')
     back, _ = read_bvh(path)
-    np.testing.assert_allclose(back[:, J['pelvis']], joints[:, J['pelvis']], atol=1e-8)
+    np.testing.assert_allclose(back[:, JOINT_INDEX['pelvis']], joints[:, JOINT_INDEX['pelvis']], atol=1e-8)
     chain_slack = np.zeros((len(joints), len(JOINT_NAMES)))
     for start, end in BONES:  # parents come first in BONES
-        recorded, exported = joints[:, J[end]] - joints[:, J[start]], back[:, J[end]] - back[:, J[start]]
+        recorded, exported = joints[:, JOINT_INDEX[end]] - joints[:, JOINT_INDEX[start]], back[:, JOINT_INDEX[end]] - back[:, JOINT_INDEX[start]]
         cosine = (np.sum(recorded * exported, axis=1)
                   / (np.linalg.norm(recorded, axis=1) * np.linalg.norm(exported, axis=1)))
         assert np.all(cosine > 1 - 1e-12), (start, end)
         length = np.linalg.norm(recorded, axis=1)
-        chain_slack[:, J[end]] = chain_slack[:, J[start]] + np.abs(length - np.median(length))
+        chain_slack[:, JOINT_INDEX[end]] = chain_slack[:, JOINT_INDEX[start]] + np.abs(length - np.median(length))
     error = np.linalg.norm(back - joints, axis=-1)
     assert np.all(error <= chain_slack + 1e-8)
     assert 1e-4 < error.max() < 0.02  # lengths do vary over this take, but by millimetres
@@ -168,7 +168,7 @@ def test_csv_and_json_parse_back():
     rows = list(csv.reader(io.StringIO(text.getvalue())))
     header, rows = rows[0], rows[1:]
     assert header[:5] == ['stamp_s', 'status', 'pelvis_x_m', 'pelvis_y_m', 'pelvis_z_m']
-    assert header[2 + 3 * J['right_wrist'] + 2] == 'right_wrist_z_m'
+    assert header[2 + 3 * JOINT_INDEX['right_wrist'] + 2] == 'right_wrist_z_m'
     assert header[47:50] == ['torso_x_m', 'torso_y_m', 'torso_z_m'] and header[50] == 'torso_rx_rad'
     assert header[-1] == 'right_forearm_rx_rad' and len(header) == 2 + 45 + 29
     assert [row[0] for row in rows] == ['1230768000.000000000', '1230768000.040000000', '1230768000.080000001',

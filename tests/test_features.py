@@ -9,12 +9,10 @@ from conftest import assert_one_line_error, run_mvpose
 
 from mvpose_nodes.body.model import JOINT_NAMES
 from mvpose_nodes.body.camera import studio_rig
-from mvpose_nodes.ros.params import PARAMETERS, load_settings
-from mvpose_nodes.tools.cli import UserError
+from mvpose_nodes.ros.params import CAMERA_FEATURES, ParameterError, default_skin_model_path, load_feature_settings
 from mvpose_nodes.vision.features import FeatureExtractor, FeatureSettings, ellipse_of
 from mvpose_nodes.vision.silhouette import BackgroundModel, chroma_key_foreground, clean_mask, silhouette_keypoints
 from mvpose_nodes.vision.skin import SkinModel
-from mvpose_nodes.app.skin import default_model_path
 
 BLUE = (60, 100, 200)
 
@@ -122,7 +120,7 @@ def studio_frame():
 
 
 def extractor(settings=FeatureSettings(), background=None):
-    return FeatureExtractor(settings, SkinModel.load(default_model_path()), background)
+    return FeatureExtractor(settings, SkinModel.load(default_skin_model_path()), background)
 
 
 def check_against_truth(features, labels, camera, pose, min_iou=0.95):
@@ -163,8 +161,8 @@ def test_no_person_gives_empty_features(studio_frame):
 
 
 def test_parameter_defaults_agree_and_bad_values_are_one_line_errors(tmp_path):
-    defaults = {p.name: p.default for p in PARAMETERS}
-    assert load_settings() == FeatureSettings(**{k: v for k, v in defaults.items()
+    defaults = {p.name: p.default for p in CAMERA_FEATURES}
+    assert load_feature_settings() == FeatureSettings(**{k: v for k, v in defaults.items()
                                                  if k in FeatureSettings.__dataclass_fields__})
     for text, fragment in (("/**: {ros__parameters: {sleeves: medium}}", 'sleeves'),
                            ("/**: {ros__parameters: {blueness_threshold: 999}}", 'blueness_threshold'),
@@ -172,8 +170,8 @@ def test_parameter_defaults_agree_and_bad_values_are_one_line_errors(tmp_path):
                            ("just text", 'not a ROS params file')):
         path = tmp_path / 'params.yaml'
         path.write_text(text)
-        with pytest.raises(UserError, match=fragment):
-            load_settings(path)
+        with pytest.raises(ParameterError, match=fragment):
+            load_feature_settings(path)
 
 
 def test_skin_train_command_and_its_errors(tmp_path):

@@ -126,8 +126,8 @@ def test_time_jump_or_reversal_reinitialises_and_missing_evidence_keeps_a_limb()
     left_arm = next(s for s in fit.stages if s.name == 'left_arm')
     assert not left_arm.fitted and left_arm.evaluations == 0
     from mvpose_nodes.fitting.stage_search import STAGE_PARAMETERS
-    from mvpose_nodes.body.kinematics import P
-    indices = [P[n] for n in STAGE_PARAMETERS['left_arm']]
+    from mvpose_nodes.body.model import PARAMETER_INDEX
+    indices = [PARAMETER_INDEX[n] for n in STAGE_PARAMETERS['left_arm']]
     assert np.array_equal(fit.parameters[indices], before[indices]), 'the left arm keeps its angles'
 
 

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from mvpose_nodes.body.camera import studio_rig
-from mvpose_nodes.tools.cli import UserError
+from mvpose_nodes.studio.i3dpost import I3dpostError
 from mvpose_nodes.studio.i3dpost import (available, find_sequence, frame_path, parse_frame_range, read_calibration,
                                   read_frame, write_calibration, write_frame)
 
@@ -51,8 +51,8 @@ def test_calibration_with_comments_and_blank_lines(tmp_path):
 
 
 def expect_user_error(path, match):
-    """The UserError raised inside the with-block names the file and says `match`."""
-    return pytest.raises(UserError, match=rf'{path.name}.*{match}')
+    """The I3dpostError raised inside the with-block names the file and says `match`."""
+    return pytest.raises(I3dpostError, match=rf'{path.name}.*{match}')
 
 
 def test_calibration_errors(tmp_path):
@@ -111,19 +111,19 @@ def test_frames_layout(tmp_path):
         assert read.dtype == np.uint8
         np.testing.assert_array_equal(read, rgb)  # lossless, and RGB (not OpenCV's BGR) both ways
 
-    with pytest.raises(UserError, match='00054.png'):
+    with pytest.raises(I3dpostError, match='00054.png'):
         read_frame(frame_path(sequence, 1, 54))
     (sequence / '000' / '00054.png').write_bytes(b'not a png')
-    with pytest.raises(UserError, match='00054.png'):
+    with pytest.raises(I3dpostError, match='00054.png'):
         read_frame(frame_path(sequence, 1, 54))
 
 
 def test_find_sequence_errors(tmp_path):
-    with pytest.raises(UserError, match='no i3DPost sequence'):
+    with pytest.raises(I3dpostError, match='no i3DPost sequence'):
         find_sequence(tmp_path)
     for take in 'take1', 'take2':
         write_frame(tmp_path / 'actor1' / take / 'walk', 1, 0, np.zeros((2, 2, 3), np.uint8))
-    with pytest.raises(UserError, match='2 sequences.*point at one.*take1/walk.*take2/walk'):
+    with pytest.raises(I3dpostError, match='2 sequences.*point at one.*take1/walk.*take2/walk'):
         find_sequence(tmp_path)
 
 
@@ -134,5 +134,5 @@ def test_parse_frame_range(text, frames):
 
 @pytest.mark.parametrize('text', ['', '52-', '-5', 'a-b', '1-2-3', '101-52', '5.5'])
 def test_parse_frame_range_errors(text):
-    with pytest.raises(UserError, match='frame range'):
+    with pytest.raises(I3dpostError, match='frame range'):
         parse_frame_range(text)

@@ -4,16 +4,30 @@ import numpy as np
 import pytest
 
 from mvpose_nodes.body.model import PARAMETER_NAMES
-from mvpose_nodes.body.geometry import quaternion_from_matrix, rotation_between
-from mvpose_nodes.body.kinematics import (BONES, J, P, bone_lengths, constrained_euler, euler_from_quaternion,
+from mvpose_nodes.body.geometry import normalize, quaternion_from_matrix, rotation_between
+from mvpose_nodes.body.kinematics import (BONES, JOINT_INDEX, PARAMETER_INDEX, bone_lengths, euler_from_quaternion,
                                      euler_matrix, forward_kinematics, inverse_kinematics)
+
+
+def constrained_euler(direction, zero_angle):
+    """The older IK step that paper 004 improves on: the Euler angles (rx, ry, rz) that turn a limb's
+    rest direction −Z into `direction` with one angle forced to zero (zero_angle 'rx' or 'ry').
+    The direction comes out right, but the limb's twist about itself, and so where a hinge child
+    bends, generally does not."""
+    d = normalize(direction)
+    tilt = np.arccos(np.clip(-d[2], -1.0, 1.0))  # angle from straight down
+    if zero_angle == 'rx':   # Rz·Ry·(0, 0, −1) = (−cos rz sin ry, −sin rz sin ry, −cos ry)
+        return 0.0, tilt, float(np.arctan2(-d[1], -d[0]))
+    # Rz·Rx·(0, 0, −1) = (−sin rz sin rx, cos rz sin rx, −cos rx)
+    return tilt, 0.0, float(np.arctan2(-d[0], d[1]))
+
 
 LENGTHS = bone_lengths(1.75)
 
 
 def rest_parameters():
     parameters = np.zeros(len(PARAMETER_NAMES))
-    parameters[P['torso_z']] = 0.93
+    parameters[PARAMETER_INDEX['torso_z']] = 0.93
     return parameters
 
 
@@ -21,24 +35,24 @@ def random_twist_free_pose(rng):
     """Random parameters whose 3-DOF limb rotations are the smallest rotations taking the rest
     direction to a random direction (their twist is what joint positions cannot show)."""
     parameters = rest_parameters()
-    parameters[[P['torso_x'], P['torso_y']]] = rng.uniform(-1, 1, 2)
-    parameters[[P['torso_rx'], P['torso_ry'], P['torso_rz']]] = rng.uniform(-0.4, 0.4, 3) * [1, 1, 6]
+    parameters[[PARAMETER_INDEX['torso_x'], PARAMETER_INDEX['torso_y']]] = rng.uniform(-1, 1, 2)
+    parameters[[PARAMETER_INDEX['torso_rx'], PARAMETER_INDEX['torso_ry'], PARAMETER_INDEX['torso_rz']]] = rng.uniform(-0.4, 0.4, 3) * [1, 1, 6]
     for bone in BONES:
         if len(bone.angles) == 3 and bone.angles[0] is not None and bone.name != 'torso':
             direction = np.array(bone.rest) + rng.uniform(-0.8, 0.8, 3)
-            parameters[[P[n] for n in bone.angles]] = euler_from_quaternion(rotation_between(bone.rest, direction))
+            parameters[[PARAMETER_INDEX[n] for n in bone.angles]] = euler_from_quaternion(rotation_between(bone.rest, direction))
         elif len(bone.angles) == 1:
-            parameters[P[bone.angles[0]]] = rng.uniform(0.05, 1.8) * (-1 if 'shin' in bone.name else 1)
+            parameters[PARAMETER_INDEX[bone.angles[0]]] = rng.uniform(0.05, 1.8) * (-1 if 'shin' in bone.name else 1)
         elif bone.angles:
-            parameters[[P[bone.angles[1]], P[bone.angles[2]]]] = rng.uniform(-0.3, 0.3, 2)
+            parameters[[PARAMETER_INDEX[bone.angles[1]], PARAMETER_INDEX[bone.angles[2]]]] = rng.uniform(-0.3, 0.3, 2)
     return parameters
 
 
 def test_rest_pose_is_upright_and_sized_by_height():
     joints, _ = forward_kinematics(rest_parameters(), LENGTHS)
-    assert joints[J['head'], 2] - joints[J['left_ankle'], 2] == pytest.approx(1.75 * (1 - 0.039), abs=1e-9)
-    assert joints[J['left_hip'], 0] < joints[J['right_hip'], 0], 'left is −X (the model faces +Y, right is +X)'
-    assert np.allclose(joints[J['left_wrist'], :2], joints[J['left_shoulder'], :2])
+    assert joints[JOINT_INDEX['head'], 2] - joints[JOINT_INDEX['left_ankle'], 2] == pytest.approx(1.75 * (1 - 0.039), abs=1e-9)
+    assert joints[JOINT_INDEX['left_hip'], 0] < joints[JOINT_INDEX['right_hip'], 0], 'left is −X (the model faces +Y, right is +X)'
+    assert np.allclose(joints[JOINT_INDEX['left_wrist'], :2], joints[JOINT_INDEX['left_shoulder'], :2])
 
 
 def test_euler_matrix_and_quaternion_conversion_agree_including_gimbal_lock():
@@ -71,9 +85,9 @@ def test_the_older_constrained_method_is_worse():
         older = recovered.copy()
         for limb in ('left_thigh', 'right_thigh', 'left_upper_arm', 'right_upper_arm'):
             bone = BONES[[b.name for b in BONES].index(limb)]
-            local = frames['torso'].T @ (joints[J[bone.joint]] - joints[J[bone.parent_joint]])
-            older[[P[n] for n in bone.angles]] = constrained_euler(local, 'rx' if 'arm' in limb else 'ry')
-        ends = [J[n] for n in ('left_wrist', 'right_wrist', 'left_ankle', 'right_ankle')]
+            local = frames['torso'].T @ (joints[JOINT_INDEX[bone.joint]] - joints[JOINT_INDEX[bone.parent_joint]])
+            older[[PARAMETER_INDEX[n] for n in bone.angles]] = constrained_euler(local, 'rx' if 'arm' in limb else 'ry')
+        ends = [JOINT_INDEX[n] for n in ('left_wrist', 'right_wrist', 'left_ankle', 'right_ankle')]
         exact.append(np.abs(forward_kinematics(recovered, LENGTHS)[0][ends] - joints[ends]).max())
         constrained.append(np.abs(forward_kinematics(older, LENGTHS)[0][ends] - joints[ends]).max())
     assert max(exact) < 1e-9
@@ -91,8 +105,8 @@ def test_parallel_and_antiparallel_bones():
     joints, _ = forward_kinematics(rest_parameters(), LENGTHS)
     assert np.allclose(inverse_kinematics(joints)[3:], 0, atol=1e-12), 'rest pose: every angle zero'
     raised = joints.copy()   # left arm straight up: anti-parallel to its rest direction
-    shoulder = raised[J['left_shoulder']]
-    raised[J['left_elbow']] = shoulder + [0, 0, LENGTHS['upper_arm']]
-    raised[J['left_wrist']] = shoulder + [0, 0, LENGTHS['upper_arm'] + LENGTHS['forearm']]
+    shoulder = raised[JOINT_INDEX['left_shoulder']]
+    raised[JOINT_INDEX['left_elbow']] = shoulder + [0, 0, LENGTHS['upper_arm']]
+    raised[JOINT_INDEX['left_wrist']] = shoulder + [0, 0, LENGTHS['upper_arm'] + LENGTHS['forearm']]
     again, _ = forward_kinematics(inverse_kinematics(raised), LENGTHS)
     assert np.allclose(again, raised, atol=1e-9)

@@ -91,7 +91,7 @@ def test_marker_mode_in_the_graph(tmp_path, background, ros_context):
     bag = tmp_path / 'markers'
     run_mvpose('synth', '--markers', '--cameras', 3, 5, 7, '--frames', '60-64', '--resolution', '960x540', '-o', bag,
                timeout=300)
-    launch_file = 'ros_ws/src/mvpose_nodes/config/markers.launch.yaml'
+    launch_file = 'ros_ws/src/mvpose_nodes/launch/markers.launch.yaml'
     graph = background('launch', launch_file)
     echo = background('topic', 'echo', '/mvpose/skeleton', '--count', 5, '--timeout', 120)
     echo_fused = background('topic', 'echo', '/cam5/marker_tracks_fused', '--count', 5, '--timeout', 120)
@@ -181,12 +181,12 @@ def test_a_bag_whose_markers_do_not_decode_is_refused_in_one_line(tmp_path):
     from std_msgs.msg import Header
     from mvpose_nodes.io.bagfile import BagWriter
     from mvpose_nodes.ros.camera_bag import frame_sets
-    from mvpose_nodes.tools.cli import UserError
+    from mvpose_nodes.io.bagfile import BagError
     from mvpose_nodes.ros.conversions import marker_tracks
     data = serialize_message(marker_tracks(Header(), np.zeros((15, 2)), [FLAG_DETECTED] * 15, blobs=[[1.0, 2.0]]))
     with BagWriter(tmp_path / 'old') as bag:
         bag.add_topic('/cam3/ground_truth/markers', 'mvpose_msgs/msg/MarkerTracks')
         bag.write('/cam3/ground_truth/markers', data[:-12], 0)
-    with pytest.raises(UserError, match=r"mvpose_msgs/msg/MarkerTracks on /cam3/ground_truth/markers does not decode") as error:
+    with pytest.raises(BagError, match=r"mvpose_msgs/msg/MarkerTracks on /cam3/ground_truth/markers does not decode") as error:
         list(frame_sets(tmp_path / 'old'))
     assert str(tmp_path / 'old') in str(error.value) and '\n' not in str(error.value)

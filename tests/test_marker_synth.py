@@ -9,7 +9,7 @@ from rosbags.highlevel import AnyReader
 
 from mvpose_nodes.studio import scene
 from mvpose_nodes.io.bagfile import BagReader
-from mvpose_nodes.body.model import JOINT_NAMES
+from mvpose_nodes.body.model import JOINT_INDEX, JOINT_NAMES
 from mvpose_nodes.body.camera import studio_rig
 from mvpose_nodes.ros.camera_bag import MARKER_CENTRES_TOPIC, camera_topics, frame_sets
 from mvpose_nodes.io.interfaces import message_class
@@ -17,7 +17,6 @@ from mvpose_nodes.studio.scripted_motion import occlusion_motion, phase_frames
 from mvpose_nodes.app.synth import make_motion
 from types import SimpleNamespace
 
-J = {name: i for i, name in enumerate(JOINT_NAMES)}
 CAMERAS = (3, 5, 7)
 
 
@@ -55,7 +54,7 @@ def test_red_shows_exactly_at_the_visible_markers(skin_tone):
             if seen:
                 assert window.any(), f'{name} visible in camera {camera.number} but not red at its centre'
             elif fraction == 0:
-                assert not (marker_ids[row - 1:row + 2, column - 1:column + 2] == J[name]).any()
+                assert not (marker_ids[row - 1:row + 2, column - 1:column + 2] == JOINT_INDEX[name]).any()
         # No red anywhere else on the person: every red pixel is (next to) a rendered marker.
         near_marker = cv2.dilate((marker_ids >= 0).astype(np.uint8), np.ones((5, 5), np.uint8)) > 0
         stray = reddish & (labels > 0) & ~near_marker
@@ -80,13 +79,13 @@ def test_marker_behind_the_body_is_hidden():
     rig = {camera.number: camera for camera in studio_rig((960, 540))}
     seen = {k: scene.marker_visibility(rig[k], pose, appearance)[2] for k in (1, 3, 5, 7)}
     for name in ('pelvis', 'neck'):
-        assert seen[5][J[name]] and not seen[1][J[name]], name
-    assert seen[7][J['left_hip']] and not seen[3][J['left_hip']]
-    assert seen[3][J['right_hip']] and not seen[7][J['right_hip']]
-    assert seen[1][J['head']] and seen[5][J['head']], 'the vertex is seen from all round'
+        assert seen[5][JOINT_INDEX[name]] and not seen[1][JOINT_INDEX[name]], name
+    assert seen[7][JOINT_INDEX['left_hip']] and not seen[3][JOINT_INDEX['left_hip']]
+    assert seen[3][JOINT_INDEX['right_hip']] and not seen[7][JOINT_INDEX['right_hip']]
+    assert seen[1][JOINT_INDEX['head']] and seen[5][JOINT_INDEX['head']], 'the vertex is seen from all round'
     # Marker centres sit on the body's surface, a few centimetres from the joints.
     offsets = np.linalg.norm(scene.marker_centres(pose, appearance) - pose.joints, axis=1)
-    assert offsets[J['head']] < 0.02 and np.all(offsets < 0.13) and np.all(offsets[np.arange(15) != J['head']] > 0.03)
+    assert offsets[JOINT_INDEX['head']] < 0.02 and np.all(offsets < 0.13) and np.all(offsets[np.arange(15) != JOINT_INDEX['head']] > 0.03)
 
 
 def test_occlusion_script_hides_the_head_behind_the_hand():
@@ -97,10 +96,10 @@ def test_occlusion_script_hides_the_head_behind_the_hand():
     appearance = scene.Appearance(markers=True)
     first, last = phases['hand_in_front_of_head']
     hidden = [f for f in range(first, last + 1)
-              if not scene.marker_visibility(camera, pose_at(motion, f), appearance)[2][J['head']]]
+              if not scene.marker_visibility(camera, pose_at(motion, f), appearance)[2][JOINT_INDEX['head']]]
     assert len(hidden) >= 3
     first, last = phases['knees_crossing']
-    assert any(not scene.marker_visibility(camera, pose_at(motion, f), appearance)[2][J['left_knee']]
+    assert any(not scene.marker_visibility(camera, pose_at(motion, f), appearance)[2][JOINT_INDEX['left_knee']]
                for f in range(first, last + 1, 3))
     # Smooth: no joint moves more than 10 cm between frames (2.5 m/s); the feet stay on or above the floor.
     assert np.abs(np.diff(motion.joints, axis=0)).max() < 0.10
@@ -135,8 +134,8 @@ def test_synth_markers_bag(tmp_path):
     for frame_set in sets:
         pixels, visible = frame_set.markers[5]
         assert pixels.shape == (15, 2) and visible.dtype == bool
-        assert not visible[J['head']], f'frame {frame_set.frame}: the hand hides the head marker from camera 5'
-        assert visible[J['pelvis']] and visible[J['left_knee']]
+        assert not visible[JOINT_INDEX['head']], f'frame {frame_set.frame}: the hand hides the head marker from camera 5'
+        assert visible[JOINT_INDEX['pelvis']] and visible[JOINT_INDEX['left_knee']]
         # The shirt is not red: the rendered image is red at visible markers only.
         image = frame_set.images[5]
         for (x, y), seen in zip(pixels, visible):

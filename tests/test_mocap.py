@@ -4,9 +4,9 @@ import functools
 import numpy as np
 import pytest
 
-from mvpose_nodes.studio.scene import mocap
+from mvpose_nodes.studio import mocap
 from mvpose_nodes.body.model import JOINT_NAMES
-from mvpose_nodes.tools.cli import UserError
+from mvpose_nodes.studio.mocap import MotionFileError
 
 CLIP_FRAMES = {'07_01': 317, '07_02': 330, '08_08': 284}
 # 08_08 is a fast walk (2.2 m/s at 1.75 m) on a capture floor that rises by about 8 cm over the clip, so
@@ -97,14 +97,14 @@ def test_malformed_bvh_is_a_one_line_user_error(tmp_path, broken, fragment):
     path = tmp_path / 'broken.bvh'
     path.write_text(TINY_BVH.format(arm_channels='Zrotation Yrotation Xrotation', arm_values='0 0 0')
                     .replace(*broken))
-    with pytest.raises(UserError) as error:
+    with pytest.raises(MotionFileError) as error:
         mocap.load_bvh(path)
     message = str(error.value)
     assert message.startswith(f'{path}: ') and fragment in message and '\n' not in message
 
 
 def test_missing_clip_names_the_folder():
-    with pytest.raises(UserError, match=str(mocap.cmu_directory())):
+    with pytest.raises(MotionFileError, match=str(mocap.cmu_directory())):
         mocap.cmu_clip('99_99')
 
 
@@ -164,7 +164,7 @@ def test_select_by_frame_number():
     np.testing.assert_array_equal(part.joints, motion.joints[10:21])
     np.testing.assert_array_equal(part.head_forward, motion.head_forward[10:21])
     for first, last in ((99, 110), (150, 166), (120, 110)):
-        with pytest.raises(UserError, match=r'frames 100\.\.165'):
+        with pytest.raises(MotionFileError, match=r'frames 100\.\.165'):
             motion.select(first, last)
 
 

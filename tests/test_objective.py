@@ -11,8 +11,28 @@ import pytest
 from mvpose_nodes.body.model import LABEL_LEFT_ARM, LABEL_TORSO
 from mvpose_nodes.body.camera import studio_rig
 from mvpose_nodes.vision.contour import SIDE_A, SIDE_B, SIDE_NONE, ContourLabels
-from mvpose_nodes.fitting.objective import SEGMENT_POINTS, boundary_distances, limb_cost, limb_cost_brute_force
+from mvpose_nodes.fitting.objective import (SEGMENT_POINTS, _camera_cost, boundary_distances, limb_cost,
+                                            segment_points)
 from mvpose_nodes.body.triangulation import best_assignment, triangulate
+
+
+def limb_cost_brute_force(segments, contour_labels, label, n=SEGMENT_POINTS, enclosure_weight=0.0):
+    """limb_cost computed directly from the boundary point lists (min over all boundary pixels), for tests.
+    contour_labels: per camera the ContourLabels (instead of BoundaryDistances)."""
+    cost, cameras_used = 0.0, []
+    for camera, (segment, contour) in enumerate(zip(segments, contour_labels)):
+        part = contour.labels == label
+        bound_1 = contour.points[part & (contour.sides == SIDE_A)].astype(float)
+        bound_2 = contour.points[part & (contour.sides == SIDE_B)].astype(float)
+        if segment is None or not len(bound_1) or not len(bound_2):
+            continue
+        points = segment_points(*segment, n)
+        d1, d2 = (np.linalg.norm(points[:, None] - bound[None], axis=2).min(axis=1) for bound in (bound_1, bound_2))
+        width = max(np.linalg.norm(bound_1[:, None] - bound_2[None], axis=2).min(axis=axis).max() for axis in (0, 1))
+        cost += _camera_cost(d1, d2, width, enclosure_weight)
+        cameras_used.append(camera)
+    return cost, cameras_used
+
 
 IMAGE_SIZE = (640, 480)
 ARM_SIDES_X = (100, 140)  # a vertical arm 40 px wide: SIDE_A at x = 100, SIDE_B at x = 140

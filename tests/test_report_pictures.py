@@ -7,7 +7,7 @@ import pytest
 from mvpose_nodes.app.reports import animation as animation_module
 from mvpose_nodes.body.model import PARAMETER_NAMES
 from mvpose_nodes.body.camera import studio_rig
-from mvpose_nodes.body.kinematics import J, P, bone_lengths, forward_kinematics
+from mvpose_nodes.body.kinematics import JOINT_INDEX, PARAMETER_INDEX, bone_lengths, forward_kinematics
 from mvpose_nodes.app.reports.animation import animation
 from mvpose_nodes.app.reports.drawing import COLOURS, JOINT_DOT, draw_skeleton
 from mvpose_nodes.app.reports.plots import error_plot
@@ -19,9 +19,9 @@ BLUE = (30, 60, 200)  # RGB of the test images
 def standing_pose(x=0.0, y=0.0, height=1.75):
     """Joints (15, 3) [m] of the template standing at (x, y) [m] on the floor."""
     parameters = np.zeros(len(PARAMETER_NAMES))
-    parameters[[P['torso_x'], P['torso_y'], P['torso_z']]] = x, y, 0.93
-    parameters[P['left_thigh_ry']] = 0.3   # a step, so the legs' bones separate in every view
-    parameters[P['right_thigh_ry']] = -0.3
+    parameters[[PARAMETER_INDEX['torso_x'], PARAMETER_INDEX['torso_y'], PARAMETER_INDEX['torso_z']]] = x, y, 0.93
+    parameters[PARAMETER_INDEX['left_thigh_ry']] = 0.3   # a step, so the legs' bones separate in every view
+    parameters[PARAMETER_INDEX['right_thigh_ry']] = -0.3
     return forward_kinematics(parameters, bone_lengths(height))[0]
 
 
@@ -89,10 +89,10 @@ def test_contact_sheet_draws_the_skeletons_where_the_cameras_see_them(tmp_path):
         return sheet[row * 180 + y, column * 320 + x]
 
     for index in (2, 6):  # cam 3 (with its image) and cam 7 (without), which see the legs apart
-        assert near(at(index, pose[J['left_knee']]), JOINT_DOT)
-        assert near(at(index, (pose[J['left_knee']] + pose[J['left_ankle']]) / 2), COLOURS['left'])
-        assert near(at(index, (pose[J['right_knee']] + pose[J['right_ankle']]) / 2), COLOURS['right'])
-        assert near(at(index, (pose[J['pelvis']] + pose[J['neck']]) / 2), COLOURS['centre'])
+        assert near(at(index, pose[JOINT_INDEX['left_knee']]), JOINT_DOT)
+        assert near(at(index, (pose[JOINT_INDEX['left_knee']] + pose[JOINT_INDEX['left_ankle']]) / 2), COLOURS['left'])
+        assert near(at(index, (pose[JOINT_INDEX['right_knee']] + pose[JOINT_INDEX['right_ankle']]) / 2), COLOURS['right'])
+        assert near(at(index, (pose[JOINT_INDEX['pelvis']] + pose[JOINT_INDEX['neck']]) / 2), COLOURS['centre'])
     cam3 = sheet[:180, 640:960]
     assert near(cam3[100, 40], BLUE, 0)  # the image itself away from the skeleton
     assert near(cam3[1, 160], COLOURS['centre'], 0)  # used for the fit: yellow frame
@@ -102,7 +102,7 @@ def test_contact_sheet_draws_the_skeletons_where_the_cameras_see_them(tmp_path):
     assert not near(sheet[1, 160], COLOURS['centre'], 40)  # cam 1 was not used: no yellow frame
 
     truth_sheet = read_rgb(contact_sheet(images, rig, None, pose, tmp_path / 'truth.png', tile_width=320))
-    x, y = np.round((rig[2].project(pose[J['head']][None])[0][0] + 0.5) * 0.5 - 0.5).astype(int)
+    x, y = np.round((rig[2].project(pose[JOINT_INDEX['head']][None])[0][0] + 0.5) * 0.5 - 0.5).astype(int)
     assert near(truth_sheet[y, 640 + x], COLOURS['truth'])
 
 
@@ -118,7 +118,7 @@ def test_draw_skeleton_skips_nan_joints_and_joints_behind_the_camera():
     camera = studio_rig((320, 180), cameras=[1])[0]
     image = np.zeros((180, 320, 3), np.uint8)
     pose = standing_pose()
-    pose[J['left_wrist']] = np.nan
+    pose[JOINT_INDEX['left_wrist']] = np.nan
     draw_skeleton(image, camera, pose, truth=False)
     assert image.any()
     behind = np.zeros_like(image)
@@ -164,7 +164,7 @@ def test_animation_over_camera_images(tmp_path):
     assert len(frames) == 6 and count == 6 and frames[0].shape == (360, 640, 3)
     # the fitted pelvis dot (dark) where camera 3 sees it, despite the lossy video
     for frame, pose in zip(frames, poses):
-        (x, y), = np.round(camera.project(pose[J['pelvis']][None])[0]).astype(int)
+        (x, y), = np.round(camera.project(pose[JOINT_INDEX['pelvis']][None])[0]).astype(int)
         assert frame[y, x].max() < 90
     assert near(frames[1][200, 20], BLUE, 25)  # the image behind
 

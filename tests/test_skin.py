@@ -9,8 +9,14 @@ import io
 import numpy as np
 import pytest
 
-from mvpose_nodes.tools.cli import UserError
-from mvpose_nodes.vision.skin import BINS, SkinModel, detect_skin, f1_score, skin_regions
+from mvpose_nodes.vision.skin import BINS, SkinModel, SkinModelError, detect_skin, mask_counts, scores_of_counts, skin_regions
+
+
+def f1_score(predicted, truth):
+    """(precision, recall, F1) of a bool predicted mask against a bool truth mask of the same
+    shape; each is 0.0 where its denominator is 0."""
+    return scores_of_counts(*mask_counts(predicted, truth))
+
 
 SKIN_MEAN, SKIN_SPREAD = (200, 140, 110), 12
 BACKGROUND_MEANS = ((40, 70, 180), (110, 25, 30))  # blue, dark red; plus greys of any level
@@ -206,7 +212,7 @@ def write_npz(path, **changes):
 def test_bad_model_file_is_a_one_line_user_error_naming_it(tmp_path, make_file):
     path = tmp_path / 'broken_model.npz'
     make_file(path)
-    with pytest.raises(UserError, match='broken_model.npz') as raised:
+    with pytest.raises(SkinModelError, match='broken_model.npz') as raised:
         SkinModel.load(path)
     assert '\n' not in str(raised.value)
 

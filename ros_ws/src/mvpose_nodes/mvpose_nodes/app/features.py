@@ -48,11 +48,10 @@ def main(argv=None, prog='features'):
 
 
 def make_extractor(params_path, skin_model_path):
-    from mvpose_nodes.ros.params import load_settings
+    from mvpose_nodes.ros.params import default_skin_model_path, load_feature_settings
     from mvpose_nodes.vision.features import FeatureExtractor
     from mvpose_nodes.vision.skin import SkinModel
-    from mvpose_nodes.app.skin import default_model_path
-    return FeatureExtractor(load_settings(params_path), SkinModel.load(skin_model_path or default_model_path()))
+    return FeatureExtractor(load_feature_settings(params_path), SkinModel.load(skin_model_path or default_skin_model_path()))
 
 
 def evaluate(args, extractor):

@@ -34,7 +34,7 @@ def main(argv=None, prog='import-i3dpost'):
 
 def import_dataset(args):
     from rclpy.serialization import serialize_message
-    from mvpose_nodes.studio.scene import i3dpost
+    from mvpose_nodes.studio import i3dpost
     from mvpose_nodes.ros.camera_bag import CameraBagWriter, frame_stamp_ns
     from mvpose_nodes.app.progress import Progress
     from mvpose_nodes.ros.conversions import compressed_image

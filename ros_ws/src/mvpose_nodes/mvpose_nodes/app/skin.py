@@ -15,13 +15,6 @@ import numpy as np
 from mvpose_nodes.tools.cli import ArgumentParser, UserError, exit_on_user_error
 
 DEFAULT_BAND = 40  # [px] of background around the person that counts as non-skin training data
-PACKAGE_MODEL = 'skin_model.npz'
-
-
-def default_model_path():
-    """The model shipped with the package (share/mvpose_nodes/data/skin_model.npz)."""
-    from ament_index_python.packages import get_package_share_directory
-    return Path(get_package_share_directory('mvpose_nodes')) / 'data' / PACKAGE_MODEL
 
 
 def build_parser(prog):

@@ -14,11 +14,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from mvpose_nodes.body.model import JOINT_NAMES, PARAMETER_NAMES
+from mvpose_nodes.body.model import JOINT_INDEX, JOINT_NAMES, PARAMETER_INDEX, PARAMETER_NAMES
 from mvpose_nodes.body.geometry import matrix_from_quaternion, normalize, quaternion_from_matrix, rotation_between
 
-J = {name: i for i, name in enumerate(JOINT_NAMES)}
-P = {name: i for i, name in enumerate(PARAMETER_NAMES)}
 
 # Bone lengths as fractions of the stature (Winter's table: hip joint at 0.530 H, knee 0.285, ankle
 # 0.039, shoulder line 0.818, elbow 0.630, wrist 0.485; shoulder breadth 0.259 H).
@@ -97,7 +95,7 @@ def forward_kinematics(parameters, lengths):
     parameters = np.asarray(parameters, dtype=float)
     rotations = _euler_matrices(np.append(parameters, 0.0)[_ANGLE_INDEX])  # index −1: a fixed angle, 0
     joints = np.zeros((len(JOINT_NAMES), 3))
-    joints[J['pelvis']] = parameters[_TORSO_POSITION]
+    joints[JOINT_INDEX['pelvis']] = parameters[_TORSO_POSITION]
     frames = []
     for bone, (parent, has_angles, rest, length, start, end) in enumerate(_CHAIN):
         frame = _IDENTITY if parent < 0 else frames[parent]
@@ -121,17 +119,17 @@ def _euler_matrices(angles):
 # frame), the rest direction, the length key, and the joint indices; and the parameter indices of each
 # bone's (rx, ry, rz) (−1: fixed at 0).
 _IDENTITY = np.eye(3)
-_TORSO_POSITION = [P['torso_x'], P['torso_y'], P['torso_z']]
+_TORSO_POSITION = [PARAMETER_INDEX['torso_x'], PARAMETER_INDEX['torso_y'], PARAMETER_INDEX['torso_z']]
 _BONE_NAMES = [bone.name for bone in BONES]
 _CHAIN = [(_BONE_NAMES.index(bone.parent) if bone.name != 'torso' else -1, bool(bone.angles),
-           np.array(bone.rest, dtype=float), bone.length, J[bone.parent_joint], J[bone.joint]) for bone in BONES]
-_ANGLE_INDEX = np.array([[P[name] if name else -1 for name in (list(bone.angles) + [None] * 3)[:3]] for bone in BONES])
+           np.array(bone.rest, dtype=float), bone.length, JOINT_INDEX[bone.parent_joint], JOINT_INDEX[bone.joint]) for bone in BONES]
+_ANGLE_INDEX = np.array([[PARAMETER_INDEX[name] if name else -1 for name in (list(bone.angles) + [None] * 3)[:3]] for bone in BONES])
 
 
 def torso_rotation(joints):
     """World rotation of the torso (columns: right, forward, up) from pelvis, hips and neck."""
-    up = normalize(joints[J['neck']] - joints[J['pelvis']])
-    right = joints[J['right_hip']] - joints[J['left_hip']]
+    up = normalize(joints[JOINT_INDEX['neck']] - joints[JOINT_INDEX['pelvis']])
+    right = joints[JOINT_INDEX['right_hip']] - joints[JOINT_INDEX['left_hip']]
     right = normalize(right - np.dot(right, up) * up)
     return np.column_stack([right, np.cross(up, right), up])
 
@@ -148,7 +146,7 @@ def hinge_twist(local, parent, joints, end, bend_sign):
     frame = parent @ local
     start = {'left_ankle': 'left_knee', 'right_ankle': 'right_knee', 'left_wrist': 'left_elbow',
              'right_wrist': 'right_elbow'}[end]
-    child = frame.T @ (joints[J[end]] - joints[J[start]])
+    child = frame.T @ (joints[JOINT_INDEX[end]] - joints[JOINT_INDEX[start]])
     if np.hypot(child[0], child[1]) < 1e-9 * max(np.linalg.norm(child), 1e-12):
         return np.eye(3)
     twist = np.arctan2(-child[0] * bend_sign, child[1] * bend_sign)
@@ -168,44 +166,31 @@ def inverse_kinematics(joints):
     (hinge_twist): bone vectors alone leave that twist open."""
     joints = np.asarray(joints, dtype=float)
     parameters = np.zeros(len(PARAMETER_NAMES))
-    parameters[[P['torso_x'], P['torso_y'], P['torso_z']]] = joints[J['pelvis']]
+    parameters[[PARAMETER_INDEX['torso_x'], PARAMETER_INDEX['torso_y'], PARAMETER_INDEX['torso_z']]] = joints[JOINT_INDEX['pelvis']]
     frames = {'torso': torso_rotation(joints)}
-    parameters[[P['torso_rx'], P['torso_ry'], P['torso_rz']]] = euler_from_quaternion(
+    parameters[[PARAMETER_INDEX['torso_rx'], PARAMETER_INDEX['torso_ry'], PARAMETER_INDEX['torso_rz']]] = euler_from_quaternion(
         quaternion_from_matrix(frames['torso']))
     for bone in BONES[1:]:
         parent = frames[bone.parent]
-        measured = parent.T @ (joints[J[bone.joint]] - joints[J[bone.parent_joint]])
+        measured = parent.T @ (joints[JOINT_INDEX[bone.joint]] - joints[JOINT_INDEX[bone.parent_joint]])
         if not bone.angles:
             frames[bone.name] = parent
             continue
         if len(bone.angles) == 1:      # hinge about the parent's X: rest −Z turned towards ±Y
             angle = np.arctan2(measured[1], -measured[2]) if np.any(measured[1:]) else 0.0
             local = euler_matrix(angle, 0.0, 0.0)
-            parameters[P[bone.angles[0]]] = angle
+            parameters[PARAMETER_INDEX[bone.angles[0]]] = angle
         elif bone.angles[0] is None:   # clavicle: rest ±X; Rz(rz)·Ry(ry) reaches any direction
             direction = normalize(measured) * np.sign(bone.rest[0])
             ry, rz = -np.arcsin(np.clip(direction[2], -1, 1)), np.arctan2(direction[1], direction[0])
             local = euler_matrix(0.0, ry, rz)
-            parameters[[P[bone.angles[1]], P[bone.angles[2]]]] = ry, rz
+            parameters[[PARAMETER_INDEX[bone.angles[1]], PARAMETER_INDEX[bone.angles[2]]]] = ry, rz
         else:
             local = matrix_from_quaternion(rotation_between(bone.rest, measured))
             if bone.name in HINGE_CHILD:
                 local = local @ hinge_twist(local, parent, joints, *HINGE_CHILD[bone.name])
             rx, ry, rz = euler_from_quaternion(quaternion_from_matrix(local))
             local = euler_matrix(rx, ry, rz)
-            parameters[[P[name] for name in bone.angles]] = rx, ry, rz
+            parameters[[PARAMETER_INDEX[name] for name in bone.angles]] = rx, ry, rz
         frames[bone.name] = parent @ local
     return parameters
-
-
-def constrained_euler(direction, zero_angle):
-    """The older IK step that paper 004 improves on: the Euler angles (rx, ry, rz) that turn a limb's
-    rest direction −Z into `direction` with one angle forced to zero (zero_angle 'rx' or 'ry').
-    The direction comes out right, but the limb's twist about itself, and so where a hinge child
-    bends, generally does not."""
-    d = normalize(direction)
-    tilt = np.arccos(np.clip(-d[2], -1.0, 1.0))  # angle from straight down
-    if zero_angle == 'rx':   # Rz·Ry·(0, 0, −1) = (−cos rz sin ry, −sin rz sin ry, −cos ry)
-        return 0.0, tilt, float(np.arctan2(-d[1], -d[0]))
-    # Rz·Rx·(0, 0, −1) = (−sin rz sin rx, cos rz sin rx, −cos rx)
-    return tilt, 0.0, float(np.arctan2(-d[0], d[1]))

@@ -155,24 +155,6 @@ def limb_cost(segments, distances, label, n=SEGMENT_POINTS, enclosure_weight=0.0
     return cost, cameras_used
 
 
-def limb_cost_brute_force(segments, contour_labels, label, n=SEGMENT_POINTS, enclosure_weight=0.0):
-    """limb_cost computed directly from the boundary point lists (min over all boundary pixels), for tests.
-    contour_labels: per camera the ContourLabels (instead of BoundaryDistances)."""
-    cost, cameras_used = 0.0, []
-    for camera, (segment, contour) in enumerate(zip(segments, contour_labels)):
-        part = contour.labels == label
-        bound_1 = contour.points[part & (contour.sides == SIDE_A)].astype(float)
-        bound_2 = contour.points[part & (contour.sides == SIDE_B)].astype(float)
-        if segment is None or not len(bound_1) or not len(bound_2):
-            continue
-        points = segment_points(*segment, n)
-        d1, d2 = (np.linalg.norm(points[:, None] - bound[None], axis=2).min(axis=1) for bound in (bound_1, bound_2))
-        width = max(np.linalg.norm(bound_1[:, None] - bound_2[None], axis=2).min(axis=axis).max() for axis in (0, 1))
-        cost += _camera_cost(d1, d2, width, enclosure_weight)
-        cameras_used.append(camera)
-    return cost, cameras_used
-
-
 # The outline objective (beyond paper 000): the person's outline explained by the body model's capsules.
 #
 # Every bone is a capsule of radius R_b [m] around its projected segment (projected radius r = R_b·f/depth

@@ -18,8 +18,12 @@ import yaml
 from mcap.reader import NonSeekingReader, make_reader
 from mcap.writer import CompressionType, Writer
 
-from mvpose_nodes.tools.cli import UserError
 from mvpose_nodes.io.interfaces import full_type_name, schema_text, type_hash
+
+
+class BagError(ValueError):
+    """A bag that is missing, damaged or not rosbag2 MCAP, or an output that exists; the message names the path."""
+
 
 METADATA_FILE = 'metadata.yaml'
 METADATA_VERSION = 9  # rosbag2 in Jazzy
@@ -71,7 +75,7 @@ class BagWriter:
     def __init__(self, directory, compression=CompressionType.ZSTD):
         self.directory = Path(directory)
         if self.directory.exists():
-            raise UserError(f"output bag '{self.directory}' already exists; choose another -o or remove it")
+            raise BagError(f"output bag '{self.directory}' already exists; choose another -o or remove it")
         self.directory.mkdir(parents=True)
         self.file_name = f'{self.directory.name}_0.mcap'
         self._stream = open(self.directory / self.file_name, 'wb')
@@ -158,7 +162,7 @@ class BagWriter:
 class BagReader:
     """Read a rosbag2 MCAP directory or a bare .mcap file.
 
-    Every problem with the input is a UserError with a one-line message naming the path.
+    Every problem with the input is a BagError with a one-line message naming the path.
     Attributes after opening: `topics` {name: TopicInfo}, `start_ns`, `end_ns`,
     `message_count`, `files` (the .mcap paths), `metadata` (metadata.yaml content or {}).
     """
@@ -182,7 +186,7 @@ class BagReader:
 
     def _find_files(self):
         if not self.path.exists():
-            raise UserError(f"bag '{self.path}': no such file or directory")
+            raise BagError(f"bag '{self.path}': no such file or directory")
         if self.path.is_file():
             return [self.path]
         metadata_path = self.path / METADATA_FILE
@@ -191,32 +195,32 @@ class BagReader:
                 self.metadata = yaml.safe_load(metadata_path.read_text())['rosbag2_bagfile_information']
                 names = self.metadata['relative_file_paths']
             except (yaml.YAMLError, KeyError, TypeError):
-                raise UserError(f"bag '{self.path}': {METADATA_FILE} is not rosbag2 metadata") from None
+                raise BagError(f"bag '{self.path}': {METADATA_FILE} is not rosbag2 metadata") from None
             storage = self.metadata.get('storage_identifier', 'mcap')
             if storage != 'mcap':
-                raise UserError(f"bag '{self.path}': storage '{storage}' is not supported (only mcap)")
+                raise BagError(f"bag '{self.path}': storage '{storage}' is not supported (only mcap)")
             files = [self.path / name for name in names]
             missing = [str(f) for f in files if not f.is_file()]
             if missing:
-                raise UserError(f"bag '{self.path}': {METADATA_FILE} lists missing file(s): {', '.join(missing)}")
+                raise BagError(f"bag '{self.path}': {METADATA_FILE} lists missing file(s): {', '.join(missing)}")
             return files
         files = sorted(self.path.glob('*.mcap'))
         if not files:
-            raise UserError(f"bag '{self.path}': not a rosbag2 bag (no {METADATA_FILE} and no .mcap file)")
+            raise BagError(f"bag '{self.path}': not a rosbag2 bag (no {METADATA_FILE} and no .mcap file)")
         return files
 
     def _summary(self, mcap_path, stream):
-        """The file's summary; scanning the whole file when it has none. Raises UserError if damaged.
+        """The file's summary; scanning the whole file when it has none. Raises BagError if damaged.
 
         Any failure of the MCAP parser means a damaged file, whatever the parser raised."""
         if stream.read(len(MCAP_MAGIC)) != MCAP_MAGIC:
-            raise UserError(f"'{mcap_path}' is not an MCAP file (it does not start with the MCAP magic bytes)")
+            raise BagError(f"'{mcap_path}' is not an MCAP file (it does not start with the MCAP magic bytes)")
         stream.seek(0)
         try:
             reader = make_reader(stream)
             profile = reader.get_header().profile
             if profile not in ('ros2', ''):
-                raise UserError(f"'{mcap_path}': MCAP profile '{profile}' is not ros2")
+                raise BagError(f"'{mcap_path}': MCAP profile '{profile}' is not ros2")
             summary = reader.get_summary()
             if summary is None or summary.statistics is None:
                 stream.seek(0)
@@ -225,22 +229,22 @@ class BagReader:
                     pass
                 summary = scanning.get_summary()
             return summary
-        except UserError:
+        except BagError:
             raise
         except Exception as error:  # noqa: BLE001 (see docstring)
             reason = str(error).splitlines()[0] if str(error) else type(error).__name__
-            raise UserError(f"'{mcap_path}' is truncated or damaged ({reason})") from None
+            raise BagError(f"'{mcap_path}' is truncated or damaged ({reason})") from None
 
     def _add_summary(self, mcap_path):
         with open(mcap_path, 'rb') as stream:
             summary = self._summary(mcap_path, stream)
         if summary is None or summary.statistics is None:
-            raise UserError(f"'{mcap_path}' is not a readable MCAP file (no summary or statistics)")
+            raise BagError(f"'{mcap_path}' is not a readable MCAP file (no summary or statistics)")
         counts = summary.statistics.channel_message_counts
         for channel_id, channel in summary.channels.items():
             schema = summary.schemas.get(channel.schema_id)
             if channel.message_encoding != SERIALIZATION_FORMAT or schema is None:
-                raise UserError(f"'{mcap_path}': topic '{channel.topic}' is not CDR with a ros2msg schema")
+                raise BagError(f"'{mcap_path}': topic '{channel.topic}' is not CDR with a ros2msg schema")
             info = self.topics.setdefault(channel.topic, TopicInfo(
                 channel.topic, full_type_name(schema.name), 0,
                 parse_qos_profiles(channel.metadata.get('offered_qos_profiles', ''))))
@@ -269,7 +273,7 @@ class BagReader:
                 yield self.topics[channel.topic], message.log_time, message.data
         except Exception as error:  # noqa: BLE001: any parser failure here means a damaged file
             reason = str(error).splitlines()[0] if str(error) else type(error).__name__
-            raise UserError(f"'{path}' is damaged: reading messages failed ({reason})") from None
+            raise BagError(f"'{path}' is damaged: reading messages failed ({reason})") from None
 
 
 def directory_size(path):

@@ -11,7 +11,10 @@ import os
 import re
 from pathlib import Path
 
-from mvpose_nodes.tools.cli import UserError
+
+class MessageTypeError(ValueError):
+    """A message type name that is malformed or not installed; the message names the type."""
+
 
 PRIMITIVE_TYPES = frozenset({
     'bool', 'byte', 'char', 'float32', 'float64', 'int8', 'uint8', 'int16', 'uint16',
@@ -22,10 +25,10 @@ TYPE_NAME = re.compile(r'^(?P<package>[A-Za-z][\w]*)/(?:(?P<kind>msg)/)?(?P<name
 
 
 def normalize_type_name(type_name):
-    """'pkg/Type' or 'pkg/msg/Type' -> ('pkg', 'Type'); anything else is a UserError."""
+    """'pkg/Type' or 'pkg/msg/Type' -> ('pkg', 'Type'); anything else is a MessageTypeError."""
     match = TYPE_NAME.match(type_name or '')
     if not match:
-        raise UserError(f"'{type_name}' is not a message type name (expected e.g. mvpose_msgs/msg/Skeleton)")
+        raise MessageTypeError(f"'{type_name}' is not a message type name (expected e.g. mvpose_msgs/msg/Skeleton)")
     return match['package'], match['name']
 
 
@@ -40,12 +43,12 @@ def message_class(type_name):
     try:
         module = importlib.import_module(f'{package}.msg')
     except ImportError:
-        raise UserError(f"unknown message type '{type_name}': interface package '{package}' is not installed "
+        raise MessageTypeError(f"unknown message type '{type_name}': interface package '{package}' is not installed "
                         'in this environment') from None
     try:
         return getattr(module, name)
     except AttributeError:
-        raise UserError(f"unknown message type '{type_name}': package '{package}' has no message '{name}'") from None
+        raise MessageTypeError(f"unknown message type '{type_name}': package '{package}' has no message '{name}'") from None
 
 
 def _share_file(package, relative):
@@ -53,7 +56,7 @@ def _share_file(package, relative):
         candidate = Path(prefix, 'share', package, relative) if prefix else None
         if candidate is not None and candidate.is_file():
             return candidate
-    raise UserError(f"no definition of '{package}/{relative}' under AMENT_PREFIX_PATH "
+    raise MessageTypeError(f"no definition of '{package}/{relative}' under AMENT_PREFIX_PATH "
                     '(is the interface package installed and its setup sourced?)')
 
 
@@ -103,7 +106,7 @@ def type_hash(type_name):
     package, name = normalize_type_name(type_name)
     try:
         description = json.loads(_share_file(package, f'msg/{name}.json').read_text())
-    except UserError:
+    except MessageTypeError:
         return ''
     wanted = full_type_name(type_name)
     return next((entry['hash_string'] for entry in description.get('type_hashes', [])

@@ -57,10 +57,14 @@ import numpy as np
 from mvpose_nodes.body import model
 
 from mvpose_nodes.body import kinematics
-from mvpose_nodes.body.model import JOINT_NAMES, PARAMETER_NAMES
-from mvpose_nodes.tools.cli import UserError
+from mvpose_nodes.body.model import JOINT_INDEX, JOINT_NAMES, PARAMETER_NAMES
 from mvpose_nodes.body.geometry import matrix_from_quaternion, quaternion_from_matrix, rotation_between
 from mvpose_nodes.studio.mocap import BVH_TO_WORLD, load_bvh
+
+
+class ExportError(ValueError):
+    """An export that cannot be written, or a file that is not an mvpose export; the message names the file."""
+
 
 FORMATS = ('csv', 'json', 'bvh')
 # mvpose_msgs/Skeleton's STATUS_* constants (a test keeps them equal): names for readers of the JSON.
@@ -194,8 +198,7 @@ def frame_time(stamps_ns):
 
 def recorded_bone_lengths(joints):
     """{bone name: [m]} median over the frames of each bone's length in joints (F, 15, 3) [m]."""
-    J = kinematics.J
-    return {bone.name: float(np.median(np.linalg.norm(joints[:, J[bone.joint]] - joints[:, J[bone.parent_joint]],
+    return {bone.name: float(np.median(np.linalg.norm(joints[:, JOINT_INDEX[bone.joint]] - joints[:, JOINT_INDEX[bone.parent_joint]],
                                                       axis=-1))) for bone in kinematics.BONES}
 
 
@@ -208,11 +211,10 @@ def bone_rotations(joints, parameters=None):
         parameters = kinematics.inverse_kinematics(joints)
     # The frames do not depend on the lengths: any will do.
     _, frames = kinematics.forward_kinematics(parameters, kinematics.bone_lengths(1.0))
-    J = kinematics.J
     rotations = {}
     for bone in kinematics.BONES:
         modelled = frames[bone.name] @ np.array(bone.rest, dtype=float)
-        recorded = joints[J[bone.joint]] - joints[J[bone.parent_joint]]
+        recorded = joints[JOINT_INDEX[bone.joint]] - joints[JOINT_INDEX[bone.parent_joint]]
         rotations[bone.name] = matrix_from_quaternion(rotation_between(modelled, recorded)) @ frames[bone.name]
     return rotations
 
@@ -232,7 +234,7 @@ def bvh_motion(motion, lengths):
     rows = np.empty((motion.frame_count, 3 + 3 * len(order)))
     for frame, (joints, parameters) in enumerate(zip(motion.joints, motion.parameters)):
         world = bone_rotations(joints, parameters)
-        rows[frame, :3] = WORLD_TO_BVH @ joints[kinematics.J[ROOT.parent_joint]]
+        rows[frame, :3] = WORLD_TO_BVH @ joints[JOINT_INDEX[ROOT.parent_joint]]
         for k, name in enumerate(order):
             parent = BVH_PARENT[name]
             local = world[name] if parent is None else world[parent].T @ world[name]
@@ -301,19 +303,19 @@ def write_bvh(motion, stream):
 
 def read_bvh(path):
     """(joints, frame_time) of a BVH written by write_bvh: joints (F, 15, 3) [m] in the world by the
-    file's own forward kinematics (mocap.load_bvh, Bvh.global_positions), frame_time [s]. UserError
+    file's own forward kinematics (mocap.load_bvh, Bvh.global_positions), frame_time [s]. ExportError
     naming the file when it is malformed or not such a BVH."""
     bvh = load_bvh(path)
     missing = [point for point in JOINT_POINTS.values() if point not in bvh.names]
     if missing:
-        raise UserError(f'{path}: not an mvpose BVH export (no joint {missing[0]})')
+        raise ExportError(f'{path}: not an mvpose BVH export (no joint {missing[0]})')
     positions = bvh.global_positions() @ BVH_TO_WORLD.T
     return positions[:, [bvh.names.index(JOINT_POINTS[name]) for name in JOINT_NAMES]], bvh.frame_time
 
 
 def write_motion(motion, path, file_format, source=None):
     """Write the motion to a new file `path` in `file_format` (one of FORMATS; `source` goes into the
-    JSON); UserError when the file exists
+    JSON); ExportError when the file exists
     (the project's commands never overwrite) or cannot be written."""
     path = Path(path)
     try:
@@ -326,6 +328,6 @@ def write_motion(motion, path, file_format, source=None):
             else:
                 write_bvh(motion, stream)
     except FileExistsError:
-        raise UserError(f"output '{path}' already exists; choose another -o or remove it") from None
+        raise ExportError(f"output '{path}' already exists; choose another -o or remove it") from None
     except OSError as error:
-        raise UserError(f"cannot write '{path}': {error.strerror or error}") from None
+        raise ExportError(f"cannot write '{path}': {error.strerror or error}") from None

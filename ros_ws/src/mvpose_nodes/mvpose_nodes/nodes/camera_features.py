@@ -9,49 +9,30 @@ encoded images, sizes that disagree with camera_info, no person) is logged once 
 answered with empty features carrying a status; the node keeps running.
 """
 from mvpose_msgs.msg import LabelledContour, SkinEllipseArray
-from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult)
+from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 from sensor_msgs.msg import CameraInfo, CompressedImage, Image
 
-from mvpose_nodes.ros.params import PARAMETERS, check, settings_from
-from mvpose_nodes.tools.cli import UserError
-from mvpose_nodes.vision.features import FeatureExtractor, draw_features
 from mvpose_nodes.ros.conversions import ImageError, colour_image, empty_feature_messages, feature_messages, rgb_image
 from mvpose_nodes.ros.helpers import LATCHED, ReportOnce, camera_of_namespace, run_node
-from mvpose_nodes.vision.silhouette import BackgroundModel
-from mvpose_nodes.vision.skin import SkinModel
-from mvpose_nodes.app.skin import default_model_path
+from mvpose_nodes.ros.params import (CAMERA_FEATURES, ParameterError, changed_values, declare_parameters,
+                                     default_skin_model_path, feature_settings_from)
+from mvpose_nodes.vision.features import FeatureExtractor, draw_features
+from mvpose_nodes.vision.silhouette import BackgroundLearner
+from mvpose_nodes.vision.skin import SkinModel, SkinModelError
 
 STREAM_DEPTH = 5
-
-
-def descriptor(parameter):
-    """The ParameterDescriptor of a camera_features_config.Parameter: description, range, choices."""
-    result = ParameterDescriptor(description=parameter.description)
-    if parameter.choices:
-        result.additional_constraints = f"one of: {', '.join(parameter.choices)}"
-    if parameter.range and isinstance(parameter.default, int) and not isinstance(parameter.default, bool):
-        result.integer_range = [IntegerRange(from_value=parameter.range[0], to_value=parameter.range[1], step=1)]
-    elif parameter.range:
-        result.floating_point_range = [FloatingPointRange(from_value=float(parameter.range[0]),
-                                                          to_value=float(parameter.range[1]), step=0.0)]
-    return result
 
 
 class CameraFeaturesNode(ReportOnce, Node):
     def __init__(self):
         super().__init__('camera_features')
         self.camera = camera_of_namespace(self.get_namespace(), 'camera_features')
-        for parameter in PARAMETERS:
-            self.declare_parameter(parameter.name, parameter.default, descriptor(parameter))
-        self.values = {p.name: self.get_parameter(p.name).value for p in PARAMETERS}
-        problems = [problem for p in PARAMETERS if (problem := check(p, self.values[p.name]))]
-        if problems:
-            raise UserError('; '.join(problems))
+        self.values = declare_parameters(self, CAMERA_FEATURES)
         self.extractor = self.make_extractor(self.values)
+        self.background = BackgroundLearner(self.values['background_frames'])
         self.add_on_set_parameters_callback(self.on_set_parameters)
         self.camera_info = None
-        self.background_frames = []
         self.silhouette_publisher = self.create_publisher(Image, 'silhouette', STREAM_DEPTH)
         self.ellipses_publisher = self.create_publisher(SkinEllipseArray, 'skin_ellipses', STREAM_DEPTH)
         self.contour_publisher = self.create_publisher(LabelledContour, 'labelled_contour', STREAM_DEPTH)
@@ -61,27 +42,20 @@ class CameraFeaturesNode(ReportOnce, Node):
             self.create_subscription(kind, topic, lambda message, t=resolved: self.on_image(message, t), STREAM_DEPTH)
         self.create_subscription(CameraInfo, 'camera_info', self.on_camera_info, LATCHED)
         self.get_logger().info(f'camera {self.camera}: {self.values["silhouette_method"]} silhouettes, '
-                               f'skin model {self.values["skin_model"] or default_model_path()}')
+                               f'skin model {self.values["skin_model"] or default_skin_model_path()}')
 
     def make_extractor(self, values):
-        path = values['skin_model'] or default_model_path()
-        return FeatureExtractor(settings_from(values), SkinModel.load(path))
+        path = values['skin_model'] or default_skin_model_path()
+        return FeatureExtractor(feature_settings_from(values), SkinModel.load(path))
 
     def on_set_parameters(self, changes):
-        values = dict(self.values)
-        for change in changes:
-            parameter = next((p for p in PARAMETERS if p.name == change.name), None)
-            if parameter is None:
-                continue
-            problem = check(parameter, change.value)
-            if problem:
-                return SetParametersResult(successful=False, reason=problem)
-            values[change.name] = change.value
         try:
+            values = changed_values(CAMERA_FEATURES, self.values, changes)
             self.extractor = self.make_extractor(values)
-        except UserError as error:
+        except (ParameterError, SkinModelError) as error:
             return SetParametersResult(successful=False, reason=str(error))
-        self.values, self.background_frames = values, []
+        self.values = values
+        self.background = BackgroundLearner(values['background_frames'])
         return SetParametersResult(successful=True)
 
     def on_camera_info(self, message):
@@ -112,12 +86,10 @@ class CameraFeaturesNode(ReportOnce, Node):
                                f'{topic}: image is {width}×{height} but camera_info says '
                                f'{self.camera_info.width}×{self.camera_info.height}')
         if self.values['silhouette_method'] == 'background' and self.extractor.background is None:
-            self.background_frames.append(rgb)
-            if len(self.background_frames) < self.values['background_frames']:
+            self.extractor.background = self.background.add(rgb)
+            if self.extractor.background is None:
                 return self.reject(header, width, height, 'learning', 'learning the background from the first '
                                    f"{self.values['background_frames']} frames (no person expected in them)")
-            self.extractor.background = BackgroundModel.from_frames(self.background_frames)
-            self.background_frames = []
             return
         features = self.extractor(rgb)
         if not features.person:

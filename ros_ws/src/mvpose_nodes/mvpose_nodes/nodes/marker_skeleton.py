@@ -22,14 +22,14 @@ from mvpose_nodes.ros.multi_camera import MultiCameraNode
 from mvpose_nodes.ros.conversions import blobs_from_message, marker_tracks, skeleton_markers, skeleton_message, \
     tracks_from_message
 from mvpose_nodes.ros.helpers import LATCHED, run_node
+from mvpose_nodes.ros.params import MARKER_SKELETON
 
 STREAM_DEPTH = 10
 
 
 class MarkerSkeletonNode(MultiCameraNode):
     def __init__(self):
-        super().__init__('marker_skeleton', {'marker_tracks': MarkerTracks},
-                         'marker tracks are fused in 3D (each needs a marker_tracker in /cam<K>)')
+        super().__init__('marker_skeleton', {'marker_tracks': MarkerTracks}, MARKER_SKELETON)
         self.views = None
         self.skeleton_publisher = self.create_publisher(Skeleton, '/mvpose/skeleton', LATCHED)
         self.marker_publisher = self.create_publisher(MarkerArray, '/mvpose/skeleton_markers', 10)

@@ -15,24 +15,21 @@ one have come, at most `fused_wait` seconds, and the tracker continues from them
 identities that the other views contradict are mended, and a hidden marker starts from where the other
 views see it.
 """
-import collections
 import time
 
 from mvpose_msgs.msg import MarkerTracks
-from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor
+from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 from sensor_msgs.msg import CompressedImage, Image
 
-from mvpose_nodes.tools.cli import UserError
-from mvpose_nodes.markers.detection import FLAG_LOST
+from mvpose_nodes.markers.detection import FLAG_LOST, MARKER_NAMES
+from mvpose_nodes.markers.sequencing import LABELLINGS_KEPT, QUEUED_IMAGES_KEPT, FusedTurns, LabelledStart
 from mvpose_nodes.markers.tracking import MarkerTracker, NearestNeighbourTracker
 from mvpose_nodes.ros.conversions import ImageError, colour_image, marker_tracks, stamp_ns, tracks_from_message
 from mvpose_nodes.ros.helpers import ReportOnce, camera_of_namespace, run_node
+from mvpose_nodes.ros.params import MARKER_TRACKER, ParameterError, changed_values, declare_parameters
 
 STREAM_DEPTH = 5
-LABELLINGS_KEPT = 50   # initial_markers messages kept while waiting for the image of the same stamp
-WAITING_IMAGES_KEPT = 3   # images kept while waiting for the labelling of the same stamp
-QUEUED_IMAGES_KEPT = 100  # images kept while waiting for the fused tracks of the previous one
 TRACKERS = {'regions': MarkerTracker, 'nearest': NearestNeighbourTracker}
 
 
@@ -40,48 +37,38 @@ class MarkerTrackerNode(ReportOnce, Node):
     def __init__(self):
         super().__init__('marker_tracker')
         self.camera = camera_of_namespace(self.get_namespace(), 'marker_tracker')
-        self.declare_parameter('method', 'regions', ParameterDescriptor(
-            description="'regions': paper 001's region-constrained tracking; 'nearest': nearest neighbour "
-                        "with constant-velocity prediction (the baseline)", additional_constraints='one of: regions, nearest'))
-        method = self.get_parameter('method').value
-        if method not in TRACKERS:
-            raise UserError(f"parameter 'method' must be one of {', '.join(TRACKERS)}, got {method!r}")
-        self.declare_parameter('fused_wait', 1.0, ParameterDescriptor(
-            description='[s] longest wait of an image for the fused tracks of the previous one on marker_tracks_fused '
-                        '(only while marker_skeleton publishes them); 0: never wait',
-            floating_point_range=[FloatingPointRange(from_value=0.0, to_value=60.0, step=0.0)]))
-        self.fused_wait = self.get_parameter('fused_wait').value
-        self.tracker = TRACKERS[method]()
-        self.queue = collections.deque()   # (rgb, header, the labelled frame's tracks or None), in turn
-        self.awaited = None                # (stamp [ns] of the last tracks published, when) until their fusion comes
+        self.values = declare_parameters(self, MARKER_TRACKER)
+        self.add_on_set_parameters_callback(self.on_set_parameters)
+        self.tracker = TRACKERS[self.values['method']]()
+        self.start = LabelledStart()
+        self.turns = FusedTurns(self.values['fused_wait'])
         self.initialised = False
-        self.labellings = {}   # stamp [ns] -> initial_markers message
-        self.waiting_images = {}   # stamp [ns] -> (rgb, header) of images seen before their labelling
         self.publisher = self.create_publisher(MarkerTracks, 'marker_tracks', STREAM_DEPTH)
         for kind, topic in ((CompressedImage, 'image_raw/compressed'), (Image, 'image_raw')):
             resolved = self.resolve_topic_name(topic)
             self.create_subscription(kind, topic, lambda message, t=resolved: self.on_image(message, t), STREAM_DEPTH)
+        self.labelling_topic = self.resolve_topic_name('initial_markers')
         self.create_subscription(MarkerTracks, 'initial_markers', self.on_labelling, LABELLINGS_KEPT)
         self.fused_topic = self.resolve_topic_name('marker_tracks_fused')
         self.create_subscription(MarkerTracks, 'marker_tracks_fused', self.on_fused, STREAM_DEPTH)
         self.create_timer(0.01, self.track_queued)
-        self.get_logger().info(f'camera {self.camera}: {method} marker tracking; waiting for the labelled '
-                               f'calibration frame on {self.resolve_topic_name("initial_markers")}')
+        self.get_logger().info(f'camera {self.camera}: {self.values["method"]} marker tracking; waiting for the '
+                               f'labelled calibration frame on {self.labelling_topic}')
+
+    def on_set_parameters(self, changes):
+        try:
+            self.values = changed_values(MARKER_TRACKER, self.values, changes)
+        except ParameterError as error:
+            return SetParametersResult(successful=False, reason=str(error))
+        self.turns.fused_wait = self.values['fused_wait']
+        return SetParametersResult(successful=True)
 
     def on_labelling(self, message):
         """Keep the labelling until its image is there (the two topics race); initialise when it is."""
         if self.initialised:
             return
-        stamp = stamp_ns(message.header)
-        self.labellings[stamp] = message
-        while len(self.labellings) > LABELLINGS_KEPT:
-            del self.labellings[min(self.labellings)]
-        if stamp in self.waiting_images:
-            waiting = sorted(self.waiting_images.items())
-            self.waiting_images = {}
-            for _, (rgb, header) in waiting:   # that image first, then any later one in stamp order
-                if stamp_ns(header) >= stamp:
-                    self.process(rgb, header)
+        for rgb, header in self.start.add_labelling(stamp_ns(message.header), message):
+            self.process(rgb, header)
 
     def on_image(self, message, topic):
         try:
@@ -93,33 +80,30 @@ class MarkerTrackerNode(ReportOnce, Node):
     def reply(self, header, status, cause, reason):
         """Publish a MarkerTracks without positions (all lost) carrying `status` and `reason` (logged once)."""
         self.report_once(cause, reason)
-        self.publisher.publish(marker_tracks(header, [[0.0, 0.0]] * 15, [FLAG_LOST] * 15, status, reason))
+        count = len(MARKER_NAMES)
+        self.publisher.publish(marker_tracks(header, [[0.0, 0.0]] * count, [FLAG_LOST] * count, status, reason))
 
     def process(self, rgb, header):
         labelled = None   # the labelled frame's own tracks: its labelling snapped to the detections
         if not self.initialised:
-            labelling = self.labellings.get(stamp_ns(header))
+            stamp = stamp_ns(header)
+            labelling = self.start.labelling_for(stamp, (rgb, header))
             if labelling is None:
-                self.waiting_images[stamp_ns(header)] = (rgb, header)
-                while len(self.waiting_images) > WAITING_IMAGES_KEPT:
-                    del self.waiting_images[min(self.waiting_images)]
                 # No reply: the image is answered once its labelling comes (a second message of the
                 # same stamp would cost the downstream synchroniser that frame).
-                return self.report_once('waiting', f'no labelled calibration frame on '
-                                                   f'{self.resolve_topic_name("initial_markers")} for the image at '
-                                                   f'{stamp_ns(header)} ns yet: held until it comes')
+                return self.report_once('waiting', f'no labelled calibration frame on {self.labelling_topic} for '
+                                                   f'the image at {stamp} ns yet: held until it comes')
             try:
                 positions, labelled_flags = tracks_from_message(labelling)
             except ValueError as error:
-                del self.labellings[stamp_ns(header)]
+                self.start.reject(stamp)
                 return self.reply(header, MarkerTracks.STATUS_BAD_INPUT, 'bad labelling',
-                                  f'{self.resolve_topic_name("initial_markers")}: {error}; dropped')
+                                  f'{self.labelling_topic}: {error}; dropped')
             labelled = self.tracker.initialise(rgb, positions, labelled_flags == MarkerTracks.FLAG_DETECTED)
-            self.initialised, self.labellings, self.waiting_images = True, {}, {}
-            self.get_logger().info(f'camera {self.camera}: initialised from the labelled frame at {stamp_ns(header)} ns')
-        self.queue.append((rgb, header, labelled))
-        if len(self.queue) > QUEUED_IMAGES_KEPT:
-            self.queue.popleft()
+            self.initialised = True
+            self.start.started()
+            self.get_logger().info(f'camera {self.camera}: initialised from the labelled frame at {stamp} ns')
+        if self.turns.push((rgb, header, labelled)):
             self.report_once('queue', f'more than {QUEUED_IMAGES_KEPT} images waiting for {self.fused_topic}: '
                                       'the oldest are dropped (is fused_wait too long for this image rate?)')
         self.track_queued()
@@ -127,18 +111,15 @@ class MarkerTrackerNode(ReportOnce, Node):
     def track_queued(self):
         """Track the queued images in turn, each once the previous one's fused tracks are in (or fused_wait
         has passed, or nothing publishes them)."""
-        while self.queue:
-            if self.awaited is not None and time.monotonic() - self.awaited[1] < self.fused_wait \
-                    and self.count_publishers(self.fused_topic) > 0:
-                return
-            rgb, header, labelled = self.queue.popleft()
+        while (item := self.turns.next_item(time.monotonic(), self.count_publishers(self.fused_topic) > 0)):
+            rgb, header, labelled = item
             positions, flags = self.tracker.track(rgb) if labelled is None else labelled
             self.publisher.publish(marker_tracks(header, positions, flags, blobs=self.tracker.detections))
-            self.awaited = (stamp_ns(header), time.monotonic())
+            self.turns.sent(stamp_ns(header), time.monotonic())
 
     def on_fused(self, message):
         """The fused tracks of the last image: the tracker continues from them."""
-        if self.awaited is None or stamp_ns(message.header) != self.awaited[0]:
+        if not self.turns.fused(stamp_ns(message.header)):
             return   # late (fused_wait passed) or not ours to wait for
         try:
             positions, flags = tracks_from_message(message)
@@ -146,7 +127,6 @@ class MarkerTrackerNode(ReportOnce, Node):
             self.report_once('bad fused', f'{self.fused_topic}: {error}; dropped')
         else:
             self.tracker.correct(positions, flags)
-        self.awaited = None
         self.track_queued()
 
 

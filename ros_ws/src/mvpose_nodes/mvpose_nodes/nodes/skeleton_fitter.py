@@ -18,14 +18,15 @@ from mvpose_nodes.ros.multi_camera import MultiCameraNode
 from mvpose_nodes.ros.conversions import (contour_from_message, joint_state, keypoints_from_messages, skeleton_markers,
                                   skeleton_message, stage_messages)
 from mvpose_nodes.ros.helpers import LATCHED, run_node
+from mvpose_nodes.ros.params import SKELETON_FITTER, fitter_settings_from
 
 FEATURES = {'silhouette': Image, 'skin_ellipses': SkinEllipseArray, 'labelled_contour': LabelledContour}
 
 
 class SkeletonFitterNode(MultiCameraNode):
     def __init__(self):
-        super().__init__('skeleton_fitter', FEATURES, 'features are fitted (each needs a camera_features in /cam<K>)')
-        self.fitter = SkeletonFitter()
+        super().__init__('skeleton_fitter', FEATURES, SKELETON_FITTER)
+        self.fitter = SkeletonFitter(fitter_settings_from(self.values))
         self.skeleton_publisher = self.create_publisher(Skeleton, '/mvpose/skeleton', LATCHED)
         self.joint_state_publisher = self.create_publisher(JointState, '/mvpose/joint_states', 10)
         self.marker_publisher = self.create_publisher(MarkerArray, '/mvpose/skeleton_markers', 10)

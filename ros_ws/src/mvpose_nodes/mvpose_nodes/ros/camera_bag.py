@@ -125,9 +125,9 @@ class FrameSet:
 def frame_sets(bag_path, cameras=None):
     """Yield the FrameSets of a bag of this contract in stamp order (cameras: numbers to keep, None = all)."""
     from rclpy.serialization import deserialize_message
-    from mvpose_nodes.io.bagfile import BagReader
-    from mvpose_nodes.tools.cli import UserError
+    from mvpose_nodes.io.bagfile import BagError, BagReader
     from mvpose_nodes.io.interfaces import message_class
+    from mvpose_nodes.markers.detection import FLAG_DETECTED
     from mvpose_nodes.ros.conversions import (camera_from_messages, image_from_compressed, image_from_raw,
                                       joints_from_skeleton, stamp_ns, tracks_from_message)
     bag = BagReader(bag_path)
@@ -141,7 +141,7 @@ def frame_sets(bag_path, cameras=None):
         try:
             message = deserialize_message(data, message_class(info.type))
         except Exception as error:   # rclpy raises its RMWError: the bytes do not fit this build's type
-            raise UserError(f"bag '{bag_path}': a {info.type} on {info.name} does not decode with this "
+            raise BagError(f"bag '{bag_path}': a {info.type} on {info.name} does not decode with this "
                             f"workspace's {info.type} (recorded with an older definition? make the bag again): "
                             f"{str(error).splitlines()[0]}") from None
         if match and match['kind'] in ('camera_info', 'camera_pose'):
@@ -158,16 +158,18 @@ def frame_sets(bag_path, cameras=None):
                 frame.labels[number] = image_from_compressed(message)
             elif match['kind'] == 'ground_truth/markers':
                 positions, flags = tracks_from_message(message)
-                frame.markers[number] = positions, flags == 0   # MarkerTracks.FLAG_DETECTED: visible
+                frame.markers[number] = positions, flags == FLAG_DETECTED   # visible
             elif match['kind'] in ('image_raw/compressed', 'image_raw'):
                 frame.images[number] = image_from_compressed(message) if match['kind'].endswith('compressed') \
                     else image_from_raw(message)
                 parts = calibration.get(number, {})
                 if len(parts) < 2:
-                    raise UserError(f"bag '{bag_path}': camera {number} has no camera_info/camera_pose before its images")
+                    raise BagError(f"bag '{bag_path}': camera {number} has no camera_info/camera_pose before its images")
                 frame.cameras[number] = camera_from_messages(number, parts['camera_info'], parts['camera_pose'])
+        except BagError:
+            raise
         except ValueError as error:
-            raise UserError(f"bag '{bag_path}': {info.name}: {error}") from None
+            raise BagError(f"bag '{bag_path}': {info.name}: {error}") from None
         for earlier in [s for s in pending if s < stamp]:  # a frame is complete once a later one starts
             yield pending.pop(earlier)
     for stamp in sorted(pending):

@@ -12,7 +12,8 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rclpy.signals import SignalHandlerOptions
 
 from mvpose_nodes.io.bagfile import DEFAULT_QOS_PROFILE
-from mvpose_nodes.tools.cli import UserError
+from mvpose_nodes.ros.params import ParameterError
+from mvpose_nodes.vision.skin import SkinModelError
 
 # Reliable, transient-local, depth 1: calibration, and the last skeleton for late subscribers.
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
@@ -30,17 +31,17 @@ class ReportOnce:
 
 
 def camera_of_namespace(namespace, executable):
-    """The camera number K of a per-camera node's namespace /cam<K>; UserError naming the executable."""
+    """The camera number K of a per-camera node's namespace /cam<K>; ParameterError naming the executable."""
     match = re.match(r'^/cam(\d+)$', namespace)
     if not match:
-        raise UserError(f"{executable} must run in a camera's namespace /cam<K> (e.g. --ros-args -r "
+        raise ParameterError(f"{executable} must run in a camera's namespace /cam<K> (e.g. --ros-args -r "
                         f"__ns:=/cam3); it runs in '{namespace}'")
     return int(match[1])
 
 
 def run_node(make_node, args=None):
     """Jazzy's rclpy run pattern for a node that spins until Ctrl-C or shutdown; the exit code.
-    A UserError while the node starts (bad parameter, namespace, model file) is one line and code 2."""
+    A bad parameter, namespace or model file while the node starts is one line and code 2."""
     rclpy.init(args=args)
     node = None
     try:
@@ -48,7 +49,7 @@ def run_node(make_node, args=None):
         rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
-    except UserError as error:
+    except (ParameterError, SkinModelError) as error:
         print(f'[ERROR] {make_node.__name__}: {error}', file=sys.stderr)
         return 2
     finally:

@@ -1,49 +1,38 @@
 """The plumbing of the nodes that combine several cameras (skeleton_fitter, marker_skeleton).
 
-Parameters `cameras`, `queue_size`, `max_interval` and `camera_timeout`; per camera, the given input
-topics through one approximate-time synchroniser (sync.py; a camera silent for camera_timeout is left
+Parameters (ros/params.py: multi_camera_parameters) `cameras`, `queue_size`, `max_interval` and
+`camera_timeout`, with the node's own; per camera, the given input topics through one
+approximate-time synchroniser (fitting/sync.py; a camera silent for camera_timeout is left
 out until it returns), and its camera_info and camera_pose (latched) turned into a Camera once both
 are there; problems logged once per cause. A subclass names its inputs and handles each frame set.
 """
 from geometry_msgs.msg import PoseStamped
-from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rclpy.node import Node
 from sensor_msgs.msg import CameraInfo
 
-from mvpose_nodes.tools.cli import UserError
+from mvpose_nodes.fitting.sync import ApproximateTimeSynchronizer
 from mvpose_nodes.ros.conversions import camera_from_messages, stamp_ns
 from mvpose_nodes.ros.helpers import LATCHED, ReportOnce
-from mvpose_nodes.fitting.sync import ApproximateTimeSynchronizer
+from mvpose_nodes.ros.params import declare_parameters
 
 
 class MultiCameraNode(ReportOnce, Node):
     """A node fed by synchronised per-camera topics. inputs: {relative topic name: message class},
-    subscribed as /cam<K>/<name> for each configured camera; on_frame_set(frame_set) gets each
-    synchronised set (sync.FrameSet: messages keyed by (camera, name), missing_groups)."""
+    subscribed as /cam<K>/<name> for each configured camera; parameters: the node's table
+    (ros/params.py, starting with multi_camera_parameters), declared here, values in self.values;
+    on_frame_set(frame_set) gets each synchronised set (fitting.sync.FrameSet: messages keyed by
+    (camera, name), missing_groups)."""
 
-    def __init__(self, name, inputs, what):
+    def __init__(self, name, inputs, parameters):
         super().__init__(name)
-        self.declare_parameter('cameras', [3, 5, 7], ParameterDescriptor(
-            description=f'i3DPost camera numbers whose {what} are combined'))
-        self.declare_parameter('queue_size', 10, ParameterDescriptor(
-            description='messages kept per input topic while frame sets are matched',
-            integer_range=[IntegerRange(from_value=1, to_value=1000, step=1)]))
-        self.declare_parameter('max_interval', 0.02, ParameterDescriptor(
-            description='[s] largest stamp spread within one frame set',
-            floating_point_range=[FloatingPointRange(from_value=0.0, to_value=10.0, step=0.0)]))
-        self.declare_parameter('camera_timeout', 1.0, ParameterDescriptor(
-            description='[s] of input time after which a silent camera is left out (status DEGRADED)',
-            floating_point_range=[FloatingPointRange(from_value=0.01, to_value=60.0, step=0.0)]))
-        cameras = list(self.get_parameter('cameras').value)
-        if not cameras or len(set(cameras)) != len(cameras) or any(not 1 <= k <= 99 for k in cameras):
-            raise UserError(f"parameter 'cameras' must list distinct camera numbers, got {cameras}")
-        self.cameras = cameras
+        self.values = declare_parameters(self, parameters)
+        self.cameras = cameras = self.values['cameras']
         channels = [(k, topic) for k in cameras for topic in inputs]
         self.sync = ApproximateTimeSynchronizer(
-            channels, queue_size=self.get_parameter('queue_size').value,
-            max_interval_ns=int(self.get_parameter('max_interval').value * 1e9),
+            channels, queue_size=self.values['queue_size'],
+            max_interval_ns=int(self.values['max_interval'] * 1e9),
             groups={channel: channel[0] for channel in channels},
-            timeout_ns=int(self.get_parameter('camera_timeout').value * 1e9))
+            timeout_ns=int(self.values['camera_timeout'] * 1e9))
         self.calibration = {k: {} for k in cameras}
         self.cameras_known = {}   # camera number -> Camera, from its latest calibration messages
         for k in cameras:

@@ -1,76 +1,70 @@
-"""The camera_features parameters in one place: name, default, range and description, shared by the
-node (which declares them) and the offline tools (which read the same params YAML)."""
+"""Every node's parameters in one place, and the one mechanism that declares and checks them.
+
+A node's parameters are a table of `Parameter`s (name, default, description, range or choices).
+`declare_parameters(node, table)` declares each with a ParameterDescriptor (so `ros2 param describe`
+shows the description and range) and checks the values it got; `load_parameters(path, table)` reads
+and checks the same names from a ROS params YAML for the offline tools. The defaults here are the
+ones in config/<executable>.yaml (a test keeps them equal). The skeleton fitter's tuning constants
+come from fitting.settings.FitterSettings, whose fields carry their own description and range.
+"""
 from dataclasses import dataclass, fields
 from pathlib import Path
 
 import yaml
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 
-from mvpose_nodes.tools.cli import UserError
+from mvpose_nodes.fitting.settings import SETTING_FIELDS, FitterSettings
 from mvpose_nodes.vision.features import FeatureSettings
+
+PACKAGE = 'mvpose_nodes'
+SKIN_MODEL_FILE = 'skin_model.npz'   # the package's skin model, in share/mvpose_nodes/data
+
+
+class ParameterError(ValueError):
+    """A parameter value, params file or node namespace that the node cannot run with; one line."""
 
 
 @dataclass(frozen=True)
 class Parameter:
     name: str
-    default: object
+    default: object         # its type is the parameter's type; a list means an integer array
     description: str
     choices: tuple = ()
-    range: tuple = ()     # (low, high) for numbers
+    range: tuple = ()       # (low, high) for numbers, for each element of an array
+    distinct: bool = False  # an array whose elements must differ
+    read_only: bool = False  # read when the node starts; `ros2 param set` cannot change it
 
 
-PARAMETERS = (
-    Parameter('silhouette_method', 'chroma', "background subtraction: 'chroma' (blue screen, as i3DPost) or "
-              "'background' (per-pixel model learned from the first background_frames frames, then kept up to date)",
-              choices=('chroma', 'background')),
-    Parameter('blueness_threshold', 25, 'chroma key: a pixel is blue screen when b - max(r, g) exceeds this [DN]',
-              range=(0, 255)),
-    Parameter('background_frames', 25, "'background' method: person-free frames that build the model first",
-              range=(1, 10000)),
-    Parameter('min_person_fraction', 0.001, 'smallest blob taken for a person, as a share of the image area',
-              range=(0.0, 0.5)),
-    Parameter('skin_model', '', "skin colour model (.npz from `./mvpose skin train`); '' = the package's",),
-    Parameter('skin_threshold', 1.0, 'log-likelihood ratio L = log(H/h) above which a pixel is skin (paper 000 '
-              'Eq. 1)', range=(-20.0, 20.0)),
-    Parameter('skin_min_area_fraction', 0.00003, 'smallest skin region, as a share of the image area',
-              range=(0.0, 0.1)),
-    Parameter('sleeves', 'auto', "clothing assumption for the arms' skin: 'short' (forearm ellipses give elbow and "
-              "hand), 'long' (hand only) or 'auto' (decided per region from its elongation)",
-              choices=('auto', 'short', 'long')),
-    Parameter('publish_overlay', False, 'also publish features_overlay: the image with every feature drawn on'),
-)
-SETTINGS_FIELDS = {f.name for f in fields(FeatureSettings)}
-
-
-def default_params_path():
-    from ament_index_python.packages import get_package_share_directory
-    return Path(get_package_share_directory('mvpose_nodes')) / 'config' / 'camera_features.yaml'
-
-
-def load_parameters(path=None):
-    """{name: value} of a ROS params YAML for camera_features (None: the package's defaults), checked."""
-    path = Path(path) if path else default_params_path()
-    try:
-        document = yaml.safe_load(path.read_text())
-        values = next(iter(document.values()))['ros__parameters']
-    except FileNotFoundError:
-        raise UserError(f'{path}: no such parameters file') from None
-    except (yaml.YAMLError, AttributeError, KeyError, TypeError, StopIteration):
-        raise UserError(f'{path}: not a ROS params file (NODE: ros__parameters: {{...}})') from None
-    known = {p.name: p for p in PARAMETERS}
-    for name, value in values.items():
-        if name not in known:
-            raise UserError(f"{path}: unknown parameter '{name}' (known: {', '.join(known)})")
-        problem = check(known[name], value)
-        if problem:
-            raise UserError(f'{path}: {problem}')
-    return {**{p.name: p.default for p in PARAMETERS}, **values}
+def descriptor(parameter):
+    """The ParameterDescriptor of a Parameter: description, range, choices, read-only."""
+    result = ParameterDescriptor(description=parameter.description, read_only=parameter.read_only)
+    if parameter.choices:
+        result.additional_constraints = f"one of: {', '.join(parameter.choices)}"
+    if parameter.range and isinstance(parameter.default, int) and not isinstance(parameter.default, bool):
+        result.integer_range = [IntegerRange(from_value=parameter.range[0], to_value=parameter.range[1], step=1)]
+    elif parameter.range and isinstance(parameter.default, float):
+        result.floating_point_range = [FloatingPointRange(from_value=float(parameter.range[0]),
+                                                          to_value=float(parameter.range[1]), step=0.0)]
+    elif parameter.range:
+        result.additional_constraints = f'each in [{parameter.range[0]}, {parameter.range[1]}]' + (
+            ', all different' if parameter.distinct else '')
+    return result
 
 
 def check(parameter, value):
     """Why `value` is not acceptable for `parameter`, or None."""
-    if type(value) is not type(parameter.default) and not (isinstance(parameter.default, float)
-                                                           and isinstance(value, int)):
-        return f"parameter '{parameter.name}' must be a {type(parameter.default).__name__}, got {value!r}"
+    default = parameter.default
+    if isinstance(default, list):
+        if not isinstance(value, (list, tuple)) or not value or any(type(v) is not int for v in value):
+            return f"parameter '{parameter.name}' must be a non-empty list of integers, got {value!r}"
+        if parameter.distinct and len(set(value)) != len(value):
+            return f"parameter '{parameter.name}' must list distinct values, got {list(value)}"
+        low, high = parameter.range or (min(value), max(value))
+        if not all(low <= v <= high for v in value):
+            return f"parameter '{parameter.name}' must have every value in [{low}, {high}], got {list(value)}"
+        return None
+    if type(value) is not type(default) and not (isinstance(default, float) and type(value) is int):
+        return f"parameter '{parameter.name}' must be a {type(default).__name__}, got {value!r}"
     if parameter.choices and value not in parameter.choices:
         return f"parameter '{parameter.name}' must be one of {', '.join(parameter.choices)}, got {value!r}"
     if parameter.range and not parameter.range[0] <= value <= parameter.range[1]:
@@ -78,9 +72,137 @@ def check(parameter, value):
     return None
 
 
-def settings_from(values):
-    return FeatureSettings(**{name: value for name, value in values.items() if name in SETTINGS_FIELDS})
+def declare_parameters(node, table):
+    """Declare every Parameter of `table` on the rclpy `node`; {name: value} as given (lists for arrays).
+    ParameterError naming every unacceptable value."""
+    for parameter in table:
+        node.declare_parameter(parameter.name, parameter.default, descriptor(parameter))
+    values = {}
+    for parameter in table:
+        value = node.get_parameter(parameter.name).value
+        values[parameter.name] = list(value) if isinstance(parameter.default, list) else value
+    problems = [problem for p in table if (problem := check(p, values[p.name]))]
+    if problems:
+        raise ParameterError('; '.join(problems))
+    return values
 
 
-def load_settings(path=None):
-    return settings_from(load_parameters(path))
+def changed_values(table, values, changes):
+    """{name: value} after `ros2 param set` changes (rclpy Parameters) to the names of `table`, or a
+    ParameterError saying why one is refused."""
+    known = {p.name: p for p in table}
+    updated = dict(values)
+    for change in changes:
+        if change.name not in known:
+            continue
+        problem = check(known[change.name], change.value)
+        if problem:
+            raise ParameterError(problem)
+        updated[change.name] = change.value
+    return updated
+
+
+def package_share():
+    """share/mvpose_nodes of the installed package."""
+    from ament_index_python.packages import get_package_share_directory
+    return Path(get_package_share_directory(PACKAGE))
+
+
+def default_skin_model_path():
+    """The skin model shipped with the package (share/mvpose_nodes/data/skin_model.npz)."""
+    return package_share() / 'data' / SKIN_MODEL_FILE
+
+
+def load_parameters(path, table, executable):
+    """{name: value} of a ROS params YAML for `executable`'s `table` (path None: the package's
+    config/<executable>.yaml), checked; the table's defaults for the names it does not set."""
+    path = Path(path) if path else package_share() / 'config' / f'{executable}.yaml'
+    try:
+        document = yaml.safe_load(path.read_text())
+        values = next(iter(document.values()))['ros__parameters']
+    except FileNotFoundError:
+        raise ParameterError(f'{path}: no such parameters file') from None
+    except (yaml.YAMLError, AttributeError, KeyError, TypeError, StopIteration):
+        raise ParameterError(f'{path}: not a ROS params file (NODE: ros__parameters: {{...}})') from None
+    known = {p.name: p for p in table}
+    for name, value in values.items():
+        if name not in known:
+            raise ParameterError(f"{path}: unknown parameter '{name}' (known: {', '.join(known)})")
+        problem = check(known[name], value)
+        if problem:
+            raise ParameterError(f'{path}: {problem}')
+    return {**{p.name: p.default for p in table}, **values}
+
+
+# ---------------------------------------------------------------- camera_features (paper 000 Sec. 3)
+
+CAMERA_FEATURES = (
+    Parameter('silhouette_method', 'chroma', "background subtraction: 'chroma' (blue screen, as i3DPost) or "
+              "'background' (per-pixel model learned from the first background_frames frames, then kept up to date)",
+              choices=('chroma', 'background')),
+    Parameter('blueness_threshold', FeatureSettings.blueness_threshold,
+              'chroma key: a pixel is blue screen when b - max(r, g) exceeds this [DN]', range=(0, 255)),
+    Parameter('background_frames', 25, "'background' method: person-free frames that build the model first",
+              range=(1, 10000)),
+    Parameter('min_person_fraction', FeatureSettings.min_person_fraction,
+              'smallest blob taken for a person, as a share of the image area', range=(0.0, 0.5)),
+    Parameter('skin_model', '', "skin colour model (.npz from `./mvpose skin train`); '' = the package's",),
+    Parameter('skin_threshold', FeatureSettings.skin_threshold,
+              'log-likelihood ratio L = log(H/h) above which a pixel is skin (paper 000 Eq. 1)', range=(-20.0, 20.0)),
+    Parameter('skin_min_area_fraction', FeatureSettings.skin_min_area_fraction,
+              'smallest skin region, as a share of the image area', range=(0.0, 0.1)),
+    Parameter('sleeves', FeatureSettings.sleeves, "clothing assumption for the arms' skin: 'short' (forearm ellipses "
+              "give elbow and hand), 'long' (hand only) or 'auto' (decided per region from its elongation)",
+              choices=('auto', 'short', 'long')),
+    Parameter('publish_overlay', False, 'also publish features_overlay: the image with every feature drawn on'),
+)
+FEATURE_SETTING_NAMES = {f.name for f in fields(FeatureSettings)}
+
+
+def feature_settings_from(values):
+    """The vision.features.FeatureSettings of camera_features parameter values {name: value}."""
+    return FeatureSettings(**{name: value for name, value in values.items() if name in FEATURE_SETTING_NAMES})
+
+
+def load_feature_settings(path=None):
+    """FeatureSettings of a camera_features params YAML (None: the package's defaults)."""
+    return feature_settings_from(load_parameters(path, CAMERA_FEATURES, 'camera_features'))
+
+
+# ---------------------------------------------------------------- marker_tracker (paper 001)
+
+MARKER_TRACKER = (
+    Parameter('method', 'regions', "'regions': paper 001's region-constrained tracking; 'nearest': nearest "
+              "neighbour with constant-velocity prediction (the baseline)", choices=('regions', 'nearest'),
+              read_only=True),
+    Parameter('fused_wait', 1.0, '[s] longest wait of an image for the fused tracks of the previous one on '
+              'marker_tracks_fused (only while marker_skeleton publishes them); 0: never wait', range=(0.0, 60.0)),
+)
+
+
+# ---------------------------------------------------------------- nodes that combine cameras
+
+def multi_camera_parameters(what):
+    """The parameters of a node that synchronises several cameras' `what` (ros/multi_camera.py)."""
+    return (
+        Parameter('cameras', [3, 5, 7], f'i3DPost camera numbers whose {what} are combined', range=(1, 99),
+                  distinct=True, read_only=True),
+        Parameter('queue_size', 10, 'messages kept per input topic while frame sets are matched',
+                  range=(1, 1000), read_only=True),
+        Parameter('max_interval', 0.02, '[s] largest stamp spread within one frame set', range=(0.0, 10.0),
+                  read_only=True),
+        Parameter('camera_timeout', 1.0, '[s] of input time after which a silent camera is left out '
+                  '(status DEGRADED)', range=(0.01, 60.0), read_only=True),
+    )
+
+
+SKELETON_FITTER = multi_camera_parameters(
+    'features are fitted (each needs a camera_features in /cam<K>)') + tuple(
+    Parameter(f.name, f.default, f.metadata['description'], range=f.metadata['range'], read_only=True)
+    for f in SETTING_FIELDS)
+MARKER_SKELETON = multi_camera_parameters('marker tracks are fused in 3D (each needs a marker_tracker in /cam<K>)')
+
+
+def fitter_settings_from(values):
+    """The fitting.settings.FitterSettings of skeleton_fitter parameter values {name: value}."""
+    return FitterSettings(**{f.name: type(f.default)(values[f.name]) for f in SETTING_FIELDS})

@@ -20,7 +20,7 @@ ASSUMPTIONS about the layout:
     blank lines are ignored, so a file with or without comment headers parses.
 
 Conventions of the Camera returned (mvpose_nodes.body.camera): X_cam = R·X_world + t with t [m],
-D = plumb_bob [k1, k2, p1, p2, k3]. Bad user input raises UserError with a one-line message
+D = plumb_bob [k1, k2, p1, p2, k3]. Bad user input raises I3dpostError with a one-line message
 naming the file (and line).
 """
 import math
@@ -32,7 +32,11 @@ import cv2
 import numpy as np
 
 from mvpose_nodes.body.camera import Camera
-from mvpose_nodes.tools.cli import UserError
+
+
+class I3dpostError(ValueError):
+    """i3DPost data (calibration, frames, folders, frame ranges) that is missing or malformed; the message names the file."""
+
 
 CAMERAS = 8
 FRAMES_PER_SECOND = 25
@@ -56,7 +60,7 @@ CALIBRATION_HEADER = """\
 
 def _units_per_metre(units):
     if units not in UNITS_PER_METRE:
-        raise UserError(f'calibration units {units!r}: expected one of {", ".join(UNITS_PER_METRE)}')
+        raise I3dpostError(f'calibration units {units!r}: expected one of {", ".join(UNITS_PER_METRE)}')
     return UNITS_PER_METRE[units]
 
 
@@ -71,15 +75,15 @@ def write_calibration(path, cameras, units='m'):
     numbers = [camera.number for camera in cameras]
     # The file holds no camera numbers: block k is folder k, so only 1..N survive a round trip.
     if numbers != list(range(1, len(cameras) + 1)) or len(cameras) > CAMERAS:
-        raise UserError(f'{path}: camera numbers {numbers} must be 1..N (N ≤ {CAMERAS}), '
+        raise I3dpostError(f'{path}: camera numbers {numbers} must be 1..N (N ≤ {CAMERAS}), '
                         f'one per camera folder 000..{len(cameras) - 1:03d}')
     lines = [CALIBRATION_HEADER.format(units=units)]
     for camera in cameras:
         if np.any(np.asarray(camera.D)[1:]):
-            raise UserError(f'{path}: {camera.name} has distortion k2, p1, p2 or k3 ≠ 0; '
+            raise I3dpostError(f'{path}: {camera.name} has distortion k2, p1, p2 or k3 ≠ 0; '
                             'the i3DPost calibration format holds k1 only')
         if camera.K[0, 1] != 0:
-            raise UserError(f'{path}: {camera.name} has a skewed K; the i3DPost calibration format holds none')
+            raise I3dpostError(f'{path}: {camera.name} has a skewed K; the i3DPost calibration format holds none')
         rows = [[0, 0, camera.width - 1, camera.height - 1],
                 [camera.K[0, 0], camera.K[1, 1], camera.K[0, 2], camera.K[1, 2]],
                 [camera.D[0]], *camera.R, camera.t * units_per_metre]
@@ -89,13 +93,13 @@ def write_calibration(path, cameras, units='m'):
 
 
 def _numeric_tokens(path):
-    """The numbers of a text file in order, '#' comments dropped; UserError naming file:line."""
+    """The numbers of a text file in order, '#' comments dropped; I3dpostError naming file:line."""
     try:
         text = path.read_text()
     except OSError as error:
-        raise UserError(f'{path}: cannot read calibration file: {error.strerror}') from None
+        raise I3dpostError(f'{path}: cannot read calibration file: {error.strerror}') from None
     except UnicodeDecodeError:
-        raise UserError(f'{path}: cannot read calibration file: not a text file') from None
+        raise I3dpostError(f'{path}: cannot read calibration file: not a text file') from None
     numbers = []
     for line_number, line in enumerate(text.splitlines(), 1):
         for token in line.split('#', 1)[0].split():
@@ -104,7 +108,7 @@ def _numeric_tokens(path):
             except ValueError:
                 value = None
             if value is None or not math.isfinite(value):
-                raise UserError(f'{path}:{line_number}: {token!r} is not a finite number')
+                raise I3dpostError(f'{path}:{line_number}: {token!r} is not a finite number')
             numbers.append(value)
     return numbers
 
@@ -119,12 +123,12 @@ def read_calibration(path, units='m', camera_numbers=None, image_size=None):
     units_per_metre = _units_per_metre(units)
     numbers = _numeric_tokens(path)
     if not numbers or len(numbers) % NUMBERS_PER_CAMERA:
-        raise UserError(f'{path}: {len(numbers)} numbers, expected {NUMBERS_PER_CAMERA} per camera '
+        raise I3dpostError(f'{path}: {len(numbers)} numbers, expected {NUMBERS_PER_CAMERA} per camera '
                         '(bounds 4, fx fy cx cy, k1, R 9, t 3)')
     blocks = np.reshape(numbers, (-1, NUMBERS_PER_CAMERA))
     camera_numbers = list(range(1, len(blocks) + 1)) if camera_numbers is None else list(camera_numbers)
     if len(camera_numbers) != len(blocks):
-        raise UserError(f'{path}: {len(blocks)} cameras, but {len(camera_numbers)} camera numbers given')
+        raise I3dpostError(f'{path}: {len(blocks)} cameras, but {len(camera_numbers)} camera numbers given')
     cameras = []
     for number, block in zip(camera_numbers, blocks):
         xmin, ymin, xmax, ymax = block[0:4]
@@ -132,13 +136,13 @@ def read_calibration(path, units='m', camera_numbers=None, image_size=None):
         R = block[9:18].reshape(3, 3)
         width, height = int(xmax - xmin) + 1, int(ymax - ymin) + 1
         if xmin != 0 or ymin != 0 or xmax != int(xmax) or ymax != int(ymax) or width < 1 or height < 1:
-            raise UserError(f'{path}: camera {number}: image bounds {xmin:g} {ymin:g} {xmax:g} {ymax:g} '
+            raise I3dpostError(f'{path}: camera {number}: image bounds {xmin:g} {ymin:g} {xmax:g} {ymax:g} '
                             'are not 0 0 width−1 height−1')
         if image_size is not None and (width, height) != tuple(image_size):
-            raise UserError(f'{path}: camera {number}: image bounds say {width}×{height} px, '
+            raise I3dpostError(f'{path}: camera {number}: image bounds say {width}×{height} px, '
                             f'the frames are {image_size[0]}×{image_size[1]} px')
         if np.abs(R.T @ R - np.eye(3)).max() > ROTATION_TOLERANCE or np.linalg.det(R) < 0:
-            raise UserError(f'{path}: camera {number}: R is not a rotation matrix')
+            raise I3dpostError(f'{path}: camera {number}: R is not a rotation matrix')
         cameras.append(Camera(number, width, height, np.array([[fx, 0, cx], [0, fy, cy], [0, 0, 1]]),
                               R.copy(), block[18:21] / units_per_metre, np.array([block[8], 0, 0, 0, 0])))
     return cameras
@@ -154,7 +158,7 @@ def write_frame(sequence_dir, camera_number, frame_number, rgb):
     path = frame_path(sequence_dir, camera_number, frame_number)
     path.parent.mkdir(parents=True, exist_ok=True)
     if not cv2.imwrite(str(path), cv2.cvtColor(np.ascontiguousarray(rgb), cv2.COLOR_RGB2BGR), PNG_FAST):
-        raise UserError(f'cannot write frame {path}')
+        raise I3dpostError(f'cannot write frame {path}')
     return path
 
 
@@ -162,10 +166,10 @@ def read_frame(path):
     """One frame as uint8 H×W×3 RGB."""
     path = Path(path)
     if not path.is_file():
-        raise UserError(f'no frame {path}')
+        raise I3dpostError(f'no frame {path}')
     bgr = cv2.imread(str(path), cv2.IMREAD_COLOR)
     if bgr is None:
-        raise UserError(f'cannot read frame {path}: not an image OpenCV reads')
+        raise I3dpostError(f'cannot read frame {path}: not an image OpenCV reads')
     return cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
 
 
@@ -177,7 +181,7 @@ def find_sequence(root):
     """The one sequence directory at or under `root`: it holds camera folders 000..007 with NNNNN.png."""
     root = Path(root)
     if not root.is_dir():
-        raise UserError(f'no directory {root}')
+        raise I3dpostError(f'no directory {root}')
     sequences = []
     for directory, subdirectories, _ in os.walk(root):
         camera_folders = [name for name in subdirectories if CAMERA_FOLDER.match(name)]
@@ -185,9 +189,9 @@ def find_sequence(root):
             sequences.append(Path(directory))
             subdirectories[:] = []  # its camera folders hold thousands of frames, no sequences: skip them
     if not sequences:
-        raise UserError(f'{root}: no i3DPost sequence (camera folders 000..007 with NNNNN.png frames) in it')
+        raise I3dpostError(f'{root}: no i3DPost sequence (camera folders 000..007 with NNNNN.png frames) in it')
     if len(sequences) > 1:
-        raise UserError(f'{root}: {len(sequences)} sequences in it, point at one of them: '
+        raise I3dpostError(f'{root}: {len(sequences)} sequences in it, point at one of them: '
                         + ', '.join(sorted(str(sequence) for sequence in sequences)))
     return sequences[0]
 
@@ -196,7 +200,7 @@ def available(sequence_dir):
     """Camera number -> sorted frame numbers found in `sequence_dir` (cameras without frames left out)."""
     sequence_dir = Path(sequence_dir)
     if not sequence_dir.is_dir():
-        raise UserError(f'no directory {sequence_dir}')
+        raise I3dpostError(f'no directory {sequence_dir}')
     frames = {}
     for folder in sorted(sequence_dir.iterdir()):
         if folder.is_dir() and CAMERA_FOLDER.match(folder.name):
@@ -210,8 +214,8 @@ def parse_frame_range(text):
     """'52-101' -> (52, 101), '60' -> (60, 60): first and last frame numbers, inclusive."""
     match = re.fullmatch(r'\s*(\d+)\s*(?:-\s*(\d+)\s*)?', text)
     if not match:
-        raise UserError(f'frame range {text!r}: expected FIRST-LAST or FRAME, e.g. 52-101')
+        raise I3dpostError(f'frame range {text!r}: expected FIRST-LAST or FRAME, e.g. 52-101')
     first, last = int(match[1]), int(match[2] or match[1])
     if first > last:
-        raise UserError(f'frame range {text!r}: first frame {first} is after last frame {last}')
+        raise I3dpostError(f'frame range {text!r}: first frame {first} is after last frame {last}')
     return first, last

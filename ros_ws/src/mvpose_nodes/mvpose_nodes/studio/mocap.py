@@ -14,8 +14,11 @@ from pathlib import Path
 import numpy as np
 
 from mvpose_nodes.body.model import JOINT_NAMES
-from mvpose_nodes.tools.cli import UserError
 from mvpose_nodes.body.geometry import matrix_from_quaternion, rotation_between
+
+
+class MotionFileError(ValueError):
+    """A motion-capture file or clip that is missing or malformed; the message names the file (and line)."""
 
 
 # +90° about x: BVH (x, y, z) → project (x, −z, y); Y up becomes z up, the T-pose's +Z facing becomes −y.
@@ -46,12 +49,12 @@ def cmu_directory():
 
 
 def cmu_clip(name):
-    """Path of a shipped CMU clip by name ('07_01' or '07_01.bvh'); UserError when missing."""
+    """Path of a shipped CMU clip by name ('07_01' or '07_01.bvh'); MotionFileError when missing."""
     directory = cmu_directory()
     path = directory / (name if name.endswith('.bvh') else f'{name}.bvh')
     if not path.is_file():
         clips = ', '.join(sorted(p.stem for p in directory.glob('*.bvh')))
-        raise UserError(f'no motion-capture clip {path.name} in {directory} (clips: {clips})')
+        raise MotionFileError(f'no motion-capture clip {path.name} in {directory} (clips: {clips})')
     return path
 
 
@@ -91,9 +94,9 @@ class Bvh:
         return len(self.motion)
 
     def index(self, name):
-        """Index of the joint or End Site `name`; UserError naming the file when there is none."""
+        """Index of the joint or End Site `name`; MotionFileError naming the file when there is none."""
         if name not in self.names:
-            raise UserError(f'{self.path}: no joint {name} (expected a CMU MotionBuilder-style skeleton)')
+            raise MotionFileError(f'{self.path}: no joint {name} (expected a CMU MotionBuilder-style skeleton)')
         return self.names.index(name)
 
     def global_transforms(self, frames=None):
@@ -138,7 +141,7 @@ class BvhReader:
 
     def error(self, message):
         line = self.tokens[min(self.position, len(self.tokens) - 1)][0] if self.tokens else 1
-        return UserError(f'{self.path}: line {line}: {message}')
+        return MotionFileError(f'{self.path}: line {line}: {message}')
 
     def peek(self):
         return self.tokens[self.position][1] if self.position < len(self.tokens) else None
@@ -183,12 +186,12 @@ class BvhReader:
 
 
 def load_bvh(path):
-    """Parse the BVH file at `path` into a Bvh; UserError naming the file and line when malformed."""
+    """Parse the BVH file at `path` into a Bvh; MotionFileError naming the file and line when malformed."""
     path = Path(path)
     try:
         reader = BvhReader(path, path.read_text())
     except (OSError, UnicodeDecodeError) as error:
-        raise UserError(f'{path}: cannot read: {error}') from None
+        raise MotionFileError(f'{path}: cannot read: {error}') from None
     points = []
     reader.take('HIERARCHY')
     reader.take('ROOT')
@@ -209,11 +212,11 @@ def load_bvh(path):
         raise reader.error(f'Frames: {frame_count}, but {len(rows)} rows of motion follow')
     for number, row in rows.items():
         if len(row) != channel_count:
-            raise UserError(f'{path}: line {number}: expected {channel_count} channel values, found {len(row)}')
+            raise MotionFileError(f'{path}: line {number}: expected {channel_count} channel values, found {len(row)}')
     try:
         motion = np.array(list(rows.values()), dtype=float).reshape(frame_count, channel_count)
     except ValueError:
-        raise UserError(f'{path}: motion rows hold a value that is not a number') from None
+        raise MotionFileError(f'{path}: motion rows hold a value that is not a number') from None
     names, parents, offsets, channels = zip(*points)
     return Bvh(path=path, names=names, parents=np.array(parents), offsets=np.array(offsets, dtype=float),
                channels=channels, motion=motion, frame_time=frame_time)
@@ -240,10 +243,10 @@ class BodyMotion:
         return np.arange(self.first_frame, self.first_frame + len(self.joints))
 
     def select(self, first, last):
-        """The frames numbered first..last (inclusive); UserError naming the available range."""
+        """The frames numbered first..last (inclusive); MotionFileError naming the available range."""
         available = self.frame_numbers
         if not available[0] <= first <= last <= available[-1]:
-            raise UserError(f'frames {first}..{last} are not in the motion: it has frames '
+            raise MotionFileError(f'frames {first}..{last} are not in the motion: it has frames '
                             f'{available[0]}..{available[-1]}')
         window = slice(first - self.first_frame, last - self.first_frame + 1)
         return dataclasses.replace(self, first_frame=first, joints=self.joints[window], toes=self.toes[window],
@@ -292,7 +295,7 @@ def world_scale(bvh, height):
     tpose = bvh.global_positions(0)[0]
     standing = tpose[bvh.index('Head_end'), 1] - min(tpose[bvh.index(name), 1] for name in TOE_TIPS)
     if standing <= 0:
-        raise UserError(f'{bvh.path}: frame 1 is not a standing T-pose (head not above the toes)')
+        raise MotionFileError(f'{bvh.path}: frame 1 is not a standing T-pose (head not above the toes)')
     return height / standing
 
 
@@ -334,7 +337,7 @@ def retarget(bvh, height=1.75, frame_rate=25.0, first_frame=0):
     above the sole.
     """
     if bvh.frame_count < 3:
-        raise UserError(f'{bvh.path}: {bvh.frame_count} frames: need the T-pose and at least two of motion')
+        raise MotionFileError(f'{bvh.path}: {bvh.frame_count} frames: need the T-pose and at least two of motion')
     scale = world_scale(bvh, height)
     rotations, positions = bvh.global_transforms(np.arange(1, bvh.frame_count))
     joints, toes, hand_tips = (scale * points @ BVH_TO_WORLD.T for points in body_points(bvh, positions))

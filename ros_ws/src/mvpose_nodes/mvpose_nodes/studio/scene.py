@@ -13,11 +13,9 @@ from dataclasses import dataclass, field, replace
 import cv2
 import numpy as np
 
-from mvpose_nodes.body.model import (JOINT_NAMES, LABEL_HEAD, LABEL_LEFT_ARM, LABEL_LEFT_HAND, LABEL_LEFT_LEG,
-                                     LABEL_RIGHT_ARM, LABEL_RIGHT_HAND, LABEL_RIGHT_LEG, LABEL_TORSO)
+from mvpose_nodes.body.model import (JOINT_INDEX, JOINT_NAMES, LABEL_HEAD, LABEL_LEFT_ARM, LABEL_LEFT_HAND, LABEL_LEFT_LEG, LABEL_RIGHT_ARM, LABEL_RIGHT_HAND, LABEL_RIGHT_LEG, LABEL_TORSO)
 from mvpose_nodes.body.geometry import normalize
 
-J = {name: index for index, name in enumerate(JOINT_NAMES)}
 SKIN_BIT = 0x80  # set in a ground-truth label mask where the surface is skin
 
 # Materials (indices into Appearance.palette()).
@@ -116,28 +114,28 @@ def body_primitives(pose, appearance):
 
 def _body_solids(pose, appearance):
     p, g = pose.joints, appearance.girth
-    up = normalize(p[J['neck']] - p[J['pelvis']])
-    left = normalize(p[J['left_hip']] - p[J['right_hip']])
+    up = normalize(p[JOINT_INDEX['neck']] - p[JOINT_INDEX['pelvis']])
+    left = normalize(p[JOINT_INDEX['left_hip']] - p[JOINT_INDEX['right_hip']])
     forward = normalize(np.cross(left, up))
     arm_material = SHIRT if appearance.long_sleeves else SKIN
     solids = [
-        Ellipsoid(p[J['pelvis']] + 0.02 * up, _frame(left, up), np.array([0.17, 0.12, 0.10]) * g, LABEL_TORSO, TROUSERS,
+        Ellipsoid(p[JOINT_INDEX['pelvis']] + 0.02 * up, _frame(left, up), np.array([0.17, 0.12, 0.10]) * g, LABEL_TORSO, TROUSERS,
                   'pelvis'),
-        Ellipsoid(0.5 * (p[J['pelvis']] + p[J['neck']]) - 0.01 * forward, _frame(up, left),
-                  np.array([0.5 * np.linalg.norm(p[J['neck']] - p[J['pelvis']]) + 0.03, 0.165 * g, 0.11 * g]),
+        Ellipsoid(0.5 * (p[JOINT_INDEX['pelvis']] + p[JOINT_INDEX['neck']]) - 0.01 * forward, _frame(up, left),
+                  np.array([0.5 * np.linalg.norm(p[JOINT_INDEX['neck']] - p[JOINT_INDEX['pelvis']]) + 0.03, 0.165 * g, 0.11 * g]),
                   LABEL_TORSO, SHIRT, 'torso'),
-        Capsule(p[J['left_shoulder']], p[J['right_shoulder']], 0.055 * g, LABEL_TORSO, SHIRT, 'shoulders'),
-        Capsule(p[J['neck']] - 0.03 * up, p[J['head']] - 0.16 * normalize(p[J['head']] - p[J['neck']]), 0.05 * g,
+        Capsule(p[JOINT_INDEX['left_shoulder']], p[JOINT_INDEX['right_shoulder']], 0.055 * g, LABEL_TORSO, SHIRT, 'shoulders'),
+        Capsule(p[JOINT_INDEX['neck']] - 0.03 * up, p[JOINT_INDEX['head']] - 0.16 * normalize(p[JOINT_INDEX['head']] - p[JOINT_INDEX['neck']]), 0.05 * g,
                 LABEL_HEAD, SKIN, 'neck'),
     ]
-    head_up = normalize(p[J['head']] - p[J['neck']])
-    solids.append(Ellipsoid(p[J['head']] - 0.115 * head_up, _frame(head_up, pose.head_forward),
+    head_up = normalize(p[JOINT_INDEX['head']] - p[JOINT_INDEX['neck']])
+    solids.append(Ellipsoid(p[JOINT_INDEX['head']] - 0.115 * head_up, _frame(head_up, pose.head_forward),
                             np.array([0.115, 0.10, 0.08]), LABEL_HEAD, HEAD, 'head'))
     for side, arm_label, hand_label, leg_label, toe, tip in (
             ('left', LABEL_LEFT_ARM, LABEL_LEFT_HAND, LABEL_LEFT_LEG, pose.toes[0], pose.hand_tips[0]),
             ('right', LABEL_RIGHT_ARM, LABEL_RIGHT_HAND, LABEL_RIGHT_LEG, pose.toes[1], pose.hand_tips[1])):
-        shoulder, elbow, wrist = (p[J[f'{side}_{n}']] for n in ('shoulder', 'elbow', 'wrist'))
-        hip, knee, ankle = (p[J[f'{side}_{n}']] for n in ('hip', 'knee', 'ankle'))
+        shoulder, elbow, wrist = (p[JOINT_INDEX[f'{side}_{n}']] for n in ('shoulder', 'elbow', 'wrist'))
+        hip, knee, ankle = (p[JOINT_INDEX[f'{side}_{n}']] for n in ('hip', 'knee', 'ankle'))
         hand_axis = tip - wrist
         solids += [
             Capsule(shoulder, elbow, 0.05 * g, arm_label, SHIRT, f'{side}_upper_arm'),
@@ -178,17 +176,17 @@ def marker_centres(pose, appearance=None, solids=None):
     solids = solids if solids is not None else _body_solids(pose, appearance)
     by_name = {solid.name: solid for solid in solids}
     p = pose.joints
-    up = normalize(p[J['neck']] - p[J['pelvis']])
-    left = normalize(p[J['left_hip']] - p[J['right_hip']])
+    up = normalize(p[JOINT_INDEX['neck']] - p[JOINT_INDEX['pelvis']])
+    left = normalize(p[JOINT_INDEX['left_hip']] - p[JOINT_INDEX['right_hip']])
     basis = {'forward': normalize(np.cross(left, up)), 'up': up,
-             'head_up': normalize(p[J['head']] - p[J['neck']])}
+             'head_up': normalize(p[JOINT_INDEX['head']] - p[JOINT_INDEX['neck']])}
     centres = np.empty((len(JOINT_NAMES), 3))
-    for name, index in J.items():
+    for name, index in JOINT_INDEX.items():
         words, bone, parts = MARKER_PLACEMENT[name]
         outward = -left if name.startswith('right') else left
         direction = sum(outward if word == 'lateral' else basis[word] for word in words)
         if bone is not None:
-            axis = normalize(p[J[bone[1]]] - p[J[bone[0]]])
+            axis = normalize(p[JOINT_INDEX[bone[1]]] - p[JOINT_INDEX[bone[0]]])
             direction = direction - np.dot(direction, axis) * axis
         direction = normalize(direction)
         far = p[index] + 1.0 * direction
@@ -426,7 +424,7 @@ def _resolve_hair(materials, normals, pose, person):
     head = materials == HEAD
     if not head.any():
         return
-    head_up = normalize(pose.joints[J['head']] - pose.joints[J['neck']])
+    head_up = normalize(pose.joints[JOINT_INDEX['head']] - pose.joints[JOINT_INDEX['neck']])
     forward = normalize(pose.head_forward - np.dot(pose.head_forward, head_up) * head_up)
     n = normals[head]
     hair = (n @ head_up > 0.45) | (n @ forward < -0.1)

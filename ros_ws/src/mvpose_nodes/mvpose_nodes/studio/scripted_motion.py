@@ -10,12 +10,10 @@ rests at each keyframe. NumPy only.
 """
 import numpy as np
 
-from mvpose_nodes.body.model import JOINT_NAMES, PARAMETER_NAMES
+from mvpose_nodes.body.model import JOINT_INDEX, PARAMETER_INDEX, PARAMETER_NAMES
 from mvpose_nodes.body.kinematics import bone_lengths, forward_kinematics
 from mvpose_nodes.studio.mocap import ANKLE_HEIGHT_PER_HEIGHT, BodyMotion
 
-P = {name: i for i, name in enumerate(PARAMETER_NAMES)}
-J = {name: i for i, name in enumerate(JOINT_NAMES)}
 HEADING = np.pi / 2     # torso_rz: the model's forward +y turned to world −x (towards camera 5)
 TOE_REACH = 0.15 / 1.75   # toe tip in front of the ankle, per metre of height
 HAND_LENGTH = 0.095       # wrist to fingertip, per metre of height
@@ -62,9 +60,9 @@ def _parameters(angles, lengths, height):
     values = {**REST, **angles}
     parameters = np.zeros(len(PARAMETER_NAMES))
     for name, degrees in values.items():
-        parameters[P[name]] = np.radians(degrees)
-    parameters[P['torso_rz']] += HEADING
-    parameters[P['torso_z']] = ANKLE_HEIGHT_PER_HEIGHT * height + lengths['thigh'] + lengths['shin']
+        parameters[PARAMETER_INDEX[name]] = np.radians(degrees)
+    parameters[PARAMETER_INDEX['torso_rz']] += HEADING
+    parameters[PARAMETER_INDEX['torso_z']] = ANKLE_HEIGHT_PER_HEIGHT * height + lengths['thigh'] + lengths['shin']
     return parameters
 
 
@@ -109,8 +107,8 @@ def body_points(parameters, height=1.75):
         forward = frames[f'{side}_shin'][:, 1].copy()  # the shin's forward, made horizontal: a flat foot
         forward[2] = 0.0
         forward /= max(np.linalg.norm(forward), 1e-9)
-        toes.append(joints[J[f'{side}_ankle']] + TOE_REACH * height * forward + [0.0, 0.0, -ankle_height])
-        tips.append(joints[J[f'{side}_wrist']] + HAND_LENGTH * height * (frames[f'{side}_forearm'] @ [0.0, 0.0, -1.0]))
+        toes.append(joints[JOINT_INDEX[f'{side}_ankle']] + TOE_REACH * height * forward + [0.0, 0.0, -ankle_height])
+        tips.append(joints[JOINT_INDEX[f'{side}_wrist']] + HAND_LENGTH * height * (frames[f'{side}_forearm'] @ [0.0, 0.0, -1.0]))
     return joints, np.array(toes), np.array(tips), frames['head'][:, 1]
 
 

@@ -10,7 +10,7 @@ import time
 
 from mvpose_nodes.io.bagfile import BagReader, BagWriter, directory_size
 from mvpose_nodes.tools.cli import ArgumentParser, UserError, exit_on_user_error
-from mvpose_nodes.io.interfaces import message_class
+from mvpose_nodes.io.interfaces import MessageTypeError, message_class
 
 # Topics that carry calibration: latched on playback so that nodes started late still get them.
 LATCHED_TOPIC_SUFFIXES = ('/camera_info', '/camera_pose')
@@ -207,7 +207,7 @@ def record(args):
                     continue
                 try:
                     msg_class = message_class(type_name)
-                except UserError as error:
+                except MessageTypeError as error:
                     unknown_types.add(topic)
                     print(f'[record] skipping {topic}: {error}', file=sys.stderr)
                     continue

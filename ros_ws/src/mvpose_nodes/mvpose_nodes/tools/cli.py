@@ -1,4 +1,8 @@
-"""One place that turns user mistakes into one-line errors instead of tracebacks."""
+"""The command-line front ends' plumbing: user mistakes become one-line errors instead of tracebacks.
+
+`UserError` is the front ends' own error. The layers below raise their own (a bag, a skin model, a
+motion file, a parameter...); `exit_on_user_error` reports those in the same one line, exit code 2.
+"""
 import argparse
 import contextlib
 import sys
@@ -37,13 +41,28 @@ class ArgumentParser(argparse.ArgumentParser):
         self.exit(2, f'{self.prog}: error: {message} (see {self.prog} --help)\n')
 
 
+def input_errors():
+    """The exception types that mean bad input from the user, each raised by its own layer."""
+    from mvpose_nodes.io.bagfile import BagError
+    from mvpose_nodes.io.interfaces import MessageTypeError
+    from mvpose_nodes.io.motion_export import ExportError
+    from mvpose_nodes.ros.params import ParameterError
+    from mvpose_nodes.studio.i3dpost import I3dpostError
+    from mvpose_nodes.studio.mocap import MotionFileError
+    from mvpose_nodes.vision.skin import SkinModelError
+    return (UserError, BagError, MessageTypeError, ExportError, ParameterError, I3dpostError, MotionFileError,
+            SkinModelError)
+
+
 @contextlib.contextmanager
 def exit_on_user_error(prog):
-    """Print `prog: error: message` for a UserError and exit 2; exit 130 quietly on Ctrl-C."""
+    """Print `prog: error: message` for bad input (input_errors) and exit 2; exit 130 quietly on Ctrl-C."""
     try:
         yield
-    except UserError as error:
-        print(f'{prog}: error: {error}', file=sys.stderr)
-        sys.exit(2)
     except KeyboardInterrupt:
         sys.exit(130)
+    except Exception as error:
+        if not isinstance(error, input_errors()):
+            raise
+        print(f'{prog}: error: {error}', file=sys.stderr)
+        sys.exit(2)

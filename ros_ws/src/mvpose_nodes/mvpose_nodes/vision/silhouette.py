@@ -78,6 +78,24 @@ class BackgroundModel:
         self.variance += rate * (difference ** 2 - self.variance)
 
 
+class BackgroundLearner:
+    """The person-free frames that build a BackgroundModel, collected one image at a time (the
+    camera_features node's 'background' silhouette method): `add(rgb)` keeps the RGB uint8 (H, W, 3)
+    frame and returns None until `frames_needed` are in, then the model (and forgets the frames)."""
+
+    def __init__(self, frames_needed):
+        self.frames_needed = frames_needed
+        self.frames = []
+
+    def add(self, rgb):
+        self.frames.append(rgb)
+        if len(self.frames) < self.frames_needed:
+            return None
+        model = BackgroundModel.from_frames(self.frames)
+        self.frames = []
+        return model
+
+
 def clean_mask(foreground, min_area=MIN_PERSON_AREA, opening=2, closing=4, max_hole_fraction=MAX_HOLE_FRACTION):
     """The person's blob: opening (radius `opening` px), closing (radius `closing`), the largest
     8-connected component if it has at least `min_area` px, its small holes filled (up to

@@ -14,7 +14,10 @@ import zipfile
 import cv2
 import numpy as np
 
-from mvpose_nodes.tools.cli import UserError
+
+class SkinModelError(ValueError):
+    """A skin colour model file that is missing or malformed; the message names the file."""
+
 
 BINS = 32  # histogram levels per colour channel
 SHIFT = 3  # 8-bit channel value >> SHIFT = bin index (256 / BINS = 2**SHIFT)
@@ -121,9 +124,9 @@ class SkinModel:
 
     @classmethod
     def load(cls, path):
-        """Read a model written by `save`; UserError naming the file if it is missing or malformed."""
+        """Read a model written by `save`; SkinModelError naming the file if it is missing or malformed."""
         if not os.path.isfile(path):
-            raise UserError(f'skin model {path}: no such file')
+            raise SkinModelError(f'skin model {path}: no such file')
         try:
             stored = np.load(path, allow_pickle=False)
             if not isinstance(stored, np.lib.npyio.NpzFile):  # a bare .npy array
@@ -131,20 +134,20 @@ class SkinModel:
             with stored:
                 arrays = {key: stored[key] for key in stored.files}
         except (OSError, ValueError, EOFError, zipfile.BadZipFile):
-            raise UserError(f'skin model {path}: not an .npz file written by SkinModel.save') from None
+            raise SkinModelError(f'skin model {path}: not an .npz file written by SkinModel.save') from None
         missing = {'skin_counts', 'background_counts', 'alpha', 'version'} - arrays.keys()
         if missing:
-            raise UserError(f'skin model {path}: missing {", ".join(sorted(missing))}')
+            raise SkinModelError(f'skin model {path}: missing {", ".join(sorted(missing))}')
         if arrays['version'].shape != () or arrays['version'] != FORMAT_VERSION:
-            raise UserError(f'skin model {path}: format version {arrays["version"]}, expected {FORMAT_VERSION}')
+            raise SkinModelError(f'skin model {path}: format version {arrays["version"]}, expected {FORMAT_VERSION}')
         for key in ('skin_counts', 'background_counts'):
             counts = arrays[key]
             if counts.shape != _SHAPE or counts.dtype.kind not in 'uif' or not np.all(np.isfinite(counts) & (counts >= 0)):
-                raise UserError(f'skin model {path}: {key} must be {_SHAPE} finite non-negative numbers, '
+                raise SkinModelError(f'skin model {path}: {key} must be {_SHAPE} finite non-negative numbers, '
                                 f'got {counts.dtype} {counts.shape}')
         alpha = arrays['alpha']
         if alpha.shape != () or alpha.dtype.kind not in 'uif' or not alpha > 0:
-            raise UserError(f'skin model {path}: alpha must be a positive number, got {alpha}')
+            raise SkinModelError(f'skin model {path}: alpha must be a positive number, got {alpha}')
         return cls(arrays['skin_counts'], arrays['background_counts'], float(alpha))
 
 
@@ -231,12 +234,6 @@ def mask_counts(predicted, truth):
     if predicted.shape != truth.shape:
         raise ValueError(f'mask shapes differ: {predicted.shape} vs {truth.shape}')
     return np.count_nonzero(predicted & truth), np.count_nonzero(predicted), np.count_nonzero(truth)
-
-
-def f1_score(predicted, truth):
-    """(precision, recall, F1) of a bool predicted mask against a bool truth mask of the same
-    shape; each is 0.0 where its denominator is 0."""
-    return scores_of_counts(*mask_counts(predicted, truth))
 
 
 def scores_of_counts(true_positives, predicted_count, truth_count):
