@@ -269,6 +269,8 @@ def run_bench(bag, window, limit, log_path):
 
         def skeleton(message):
             stamp = stamp_ns(message.header)
+            if message.status == Skeleton.STATUS_LOST:
+                return   # no fit: the last pose repeated (counted as too few views below)
             if stamp in result.sent and stamp not in result.skeletons:
                 result.skeletons[stamp] = (time.monotonic(), message.fit_time)
                 answered[stamp] = 'fitted'

@@ -76,14 +76,17 @@ def demo(bag, output, rate):
 
 def live_line(message, run):
     """One compact line per fitted frame: frame, count, status, fit time, and the error where the truth is known."""
+    from mvpose_nodes.app.reports.accuracy import joint_errors_mm
+    from mvpose_nodes.io.motion_export import STATUS_NAMES
     from mvpose_nodes.ros.camera_bag import frame_number_of
     from mvpose_nodes.ros.conversions import joints_from_skeleton, stamp_ns
     stamp = stamp_ns(message.header)
-    status = {0: 'OK', 1: 'INITIALISING', 2: 'DEGRADED', 3: 'LOST'}.get(message.status, str(message.status))
+    status = STATUS_NAMES.get(message.status, str(message.status))
     truth = run.truth.get(stamp)
     error = ''
     if truth is not None:
-        error = (f'  mean joint error {1000 * np.linalg.norm(joints_from_skeleton(message) - joints_from_skeleton(truth), axis=1).mean():5.1f} mm')
+        mean = joint_errors_mm(joints_from_skeleton(message), joints_from_skeleton(truth)).mean()
+        error = f'  mean joint error {mean:5.1f} mm'
     print(f'[demo] frame {frame_number_of(stamp):4d}  {len(run.fitted):3d}/{run.frame_sets}  {status:<12} '
           f'fit {1000 * message.fit_time:4.0f} ms{error}', flush=True)
 
@@ -92,7 +95,7 @@ def evaluate_and_draw(bag, run, output, used_cameras):
     """Table 2 on the terminal; the error plot, contact sheet and animation on disk. {name: Path}."""
     from mvpose_nodes.body.camera import studio_rig
     from mvpose_nodes.ros.camera_bag import frame_number_of, frame_sets
-    from mvpose_nodes.app.fit import report
+    from mvpose_nodes.app.reports.accuracy import joint_errors_mm, print_table_2
     from mvpose_nodes.app.reports.animation import animation
     from mvpose_nodes.app.reports.plots import error_plot
     from mvpose_nodes.app.reports.sheets import contact_sheet
@@ -105,14 +108,14 @@ def evaluate_and_draw(bag, run, output, used_cameras):
         truth = np.array([joints_from_skeleton(run.truth[s]) for s in truth_stamps])
         matched = np.array([joints_from_skeleton(run.fitted[s]) for s in truth_stamps])
         print()
-        report(matched, truth, output / 'fitted')
+        print_table_2(matched, truth, output / 'fitted')
         print()
         all_stamps = sorted(run.truth)   # every played frame: the ones without a fit are gaps in the plot
         per_joint = np.full((len(all_stamps), fitted.shape[1]), np.nan)
         for row, stamp in enumerate(all_stamps):
             if stamp in run.fitted:
-                per_joint[row] = 1000 * np.linalg.norm(joints_from_skeleton(run.fitted[stamp])
-                                                       - joints_from_skeleton(run.truth[stamp]), axis=1)
+                per_joint[row] = joint_errors_mm(joints_from_skeleton(run.fitted[stamp]),
+                                                 joints_from_skeleton(run.truth[stamp]))
         pictures['error plot'] = error_plot(per_joint.mean(axis=1), [frame_number_of(s) for s in all_stamps],
                                             output / 'error_per_frame.png', per_joint=per_joint)
     middle = stamps[len(stamps) // 2]
@@ -143,13 +146,15 @@ def evaluate_and_draw(bag, run, output, used_cameras):
 
 
 def summary(bag, run, pictures, output, seconds):
+    from mvpose_nodes.app.reports.accuracy import PAPER_MEAN_MM, joint_errors_mm
     from mvpose_nodes.ros.conversions import joints_from_skeleton
     error = ''
     matched = [s for s in run.fitted if s in run.truth]
     if matched:
-        mean = 1000 * np.mean([np.linalg.norm(joints_from_skeleton(run.fitted[s]) - joints_from_skeleton(run.truth[s]),
-                                              axis=1).mean() for s in matched])
-        error = f' Their mean joint error against the ground truth is {mean:.1f} mm (paper 000: 44.4 mm on i3DPost).'
+        mean = np.mean([joint_errors_mm(joints_from_skeleton(run.fitted[s]), joints_from_skeleton(run.truth[s])).mean()
+                        for s in matched])
+        error = (f' Their mean joint error against the ground truth is {mean:.1f} mm (paper 000: {PAPER_MEAN_MM} mm '
+                 'on i3DPost).')
     fit_ms = 1000 * np.median([m.fit_time for m in run.fitted.values()])
     listed = '; '.join(f'{name}: {path}' for name, path in pictures.items())
     print(f'[demo] What was shown: {bag} was replayed over DDS to three camera_features processes and a '

@@ -14,10 +14,6 @@ import numpy as np
 
 from mvpose_nodes.tools.cli import ArgumentParser, UserError, exit_on_user_error
 
-# Paper 000 Table 2: mean Euclidean error per joint P1..P15 [mm], and the overall mean.
-PAPER_JOINT_ERRORS = (36.6, 25.9, 67.0, 72.3, 35.4, 86.1, 69.3, 27.0, 132.2, 30.0, 15.8, 11.1, 31.9, 13.4, 12.4)
-PAPER_MEAN = 44.4
-
 
 def build_parser(prog):
     parser = ArgumentParser(prog=prog, description=__doc__.split('\n\n')[0])
@@ -39,6 +35,7 @@ def fit_main(argv=None, prog='fit'):
 
 
 def fit_bag(args):
+    from mvpose_msgs.msg import Skeleton
     from rclpy.serialization import serialize_message
     from mvpose_nodes.io.bagfile import BagWriter
     from mvpose_nodes.body.model import PARAMETER_NAMES
@@ -81,7 +78,8 @@ def fit_bag(args):
             fit_times.append(fit.seconds)
             message = skeleton_message(fit.joints, frame_set.stamp_ns, parameter_names=list(PARAMETER_NAMES),
                                        parameters=fit.parameters.tolist(), stages=stage_messages(fit.stages),
-                                       status=1 if fit.initialised else 0, fit_time=fit.seconds)
+                                       status=Skeleton.STATUS_INITIALISING if fit.initialised else Skeleton.STATUS_OK,
+                                       fit_time=fit.seconds)
             out.write(SKELETON_TOPIC, serialize_message(message), frame_set.stamp_ns)
             if frame_set.truth is not None:
                 out.write(GROUND_TRUTH_TOPIC, serialize_message(skeleton_message(frame_set.truth, frame_set.stamp_ns)),
@@ -101,6 +99,7 @@ def eval_main(argv=None, prog='eval'):
     parser.add_argument('--truth', type=Path, help='bag with /mvpose/ground_truth (default: the recorded bag)')
     args = parser.parse_args(sys.argv[1:] if argv is None else argv)
     with exit_on_user_error(prog):
+        from mvpose_nodes.app.reports.accuracy import print_table_2
         from mvpose_nodes.ros.camera_bag import GROUND_TRUTH_TOPIC, SKELETON_TOPIC
         fitted = skeletons(args.bag, SKELETON_TOPIC)
         truth = skeletons(args.truth or args.bag, GROUND_TRUTH_TOPIC)
@@ -108,7 +107,7 @@ def eval_main(argv=None, prog='eval'):
         if not stamps:
             raise UserError(f"no stamp has both a fitted skeleton ({args.bag}) and a ground truth "
                             f"({args.truth or args.bag})")
-        report(np.array([fitted[s] for s in stamps]), np.array([truth[s] for s in stamps]), args.bag)
+        print_table_2(np.array([fitted[s] for s in stamps]), np.array([truth[s] for s in stamps]), args.bag)
     return 0
 
 
@@ -126,29 +125,3 @@ def skeletons(bag_path, topic):
         message = deserialize_message(data, Skeleton)
         found[stamp_ns(message.header)] = joints_from_skeleton(message)
     return found
-
-
-def report(fitted, truth, bag):
-    """Paper 000 Table 2 layout, Eq. 12 and limb swaps; fitted and truth (F, 15, 3) [m]."""
-    from mvpose_nodes.body.model import JOINT_NAMES
-    delta = np.abs(fitted - truth) * 1000.0                       # [mm]
-    distance = np.linalg.norm(fitted - truth, axis=2) * 1000.0   # (F, 15)
-    per_frame = distance.mean(axis=1)                            # Eq. 12
-    print(f'eval: {bag}  ({len(fitted)} frames matched by stamp)   errors in mm')
-    print(f'  {"joint":<18} {"|ΔX| mean±std":>15} {"|ΔY| mean±std":>15} {"|ΔZ| mean±std":>15} '
-          f'{"mean dist":>10} {"paper":>7}')
-    for j, name in enumerate(JOINT_NAMES):
-        cells = ' '.join(f'{delta[:, j, a].mean():>7.1f}±{delta[:, j, a].std():<7.1f}' for a in range(3))
-        print(f'  P{j + 1:<2} {name:<14} {cells} {distance[:, j].mean():>10.1f} {PAPER_JOINT_ERRORS[j]:>7.1f}')
-    cells = ' '.join(f'{delta[..., a].mean():>7.1f}±{delta[..., a].std():<7.1f}' for a in range(3))
-    print(f'  {"mean":<18} {cells} {distance.mean():>10.1f} {PAPER_MEAN:>7.1f}')
-    print(f'  Eq. 12 per frame: mean {per_frame.mean():.1f} mm, median {np.median(per_frame):.1f}, '
-          f'max {per_frame.max():.1f}  (paper: 44.4 mm Table 2 mean; aim <= 25 mm)')
-    swaps = 0
-    for side in ('ankle', 'knee', 'wrist', 'elbow'):
-        left, right = JOINT_NAMES.index(f'left_{side}'), JOINT_NAMES.index(f'right_{side}')
-        straight = distance[:, left] + distance[:, right]
-        crossed = (np.linalg.norm(fitted[:, left] - truth[:, right], axis=1)
-                   + np.linalg.norm(fitted[:, right] - truth[:, left], axis=1)) * 1000.0
-        swaps += int(np.sum(crossed < straight))
-    print(f'  left/right limb swaps (a left/right joint pair nearer the other side\'s truth): {swaps}')

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from mvpose_nodes.app.reports.accuracy import joint_errors_mm
 from mvpose_nodes.tools.cli import ArgumentParser, UserError, exit_on_user_error
 
 FUSED = 'regions + 3D fusion'   # the marker mode graph: marker_tracker per camera + marker_skeleton
@@ -136,7 +137,7 @@ def report(bag, results, camera_of, truth_3d, names, fused_3d):
         if joints is None:
             joints = triangulated(results[method], camera_of)
         truth = np.array(truth_3d[:len(joints)], dtype=float)
-        error_3d = 1000 * np.linalg.norm(np.array(joints) - truth, axis=2)
+        error_3d = joint_errors_mm(np.array(joints), truth)
         summary[method] = (errors[visible].mean() if visible.any() else np.nan,
                            errors[~visible].mean() if (~visible).any() else np.nan, int(swaps.sum()),
                            np.nanmean(error_3d), np.nanmax(error_3d))

@@ -131,7 +131,7 @@ def render_frame(frame):
 
 
 def make_motion(args):
-    from mvpose_nodes.ros.camera_bag import FRAME_RATE
+    from mvpose_nodes.studio.i3dpost import FRAME_RATE
     from mvpose_nodes.studio.i3dpost import parse_frame_range
     from mvpose_nodes.studio.mocap import cmu_clip, load_bvh, retarget, standing_motion
     if args.motion == 'occlusions':

@@ -59,6 +59,7 @@ from mvpose_nodes.body import model
 from mvpose_nodes.body import kinematics
 from mvpose_nodes.body.model import JOINT_INDEX, JOINT_NAMES, PARAMETER_NAMES
 from mvpose_nodes.body.geometry import matrix_from_quaternion, quaternion_from_matrix, rotation_between
+from mvpose_nodes.studio.i3dpost import FRAME_RATE
 from mvpose_nodes.studio.mocap import BVH_TO_WORLD, load_bvh
 
 
@@ -70,7 +71,7 @@ FORMATS = ('csv', 'json', 'bvh')
 # mvpose_msgs/Skeleton's STATUS_* constants (a test keeps them equal): names for readers of the JSON.
 STATUS_NAMES = {0: 'OK', 1: 'INITIALISING', 2: 'DEGRADED', 3: 'LOST'}
 PARAMETER_UNITS = tuple('m' if name in ('torso_x', 'torso_y', 'torso_z') else 'rad' for name in PARAMETER_NAMES)
-DEFAULT_FRAME_TIME = 1 / 25  # [s] i3DPost's rate, for a take with a single stamp
+DEFAULT_FRAME_TIME = 1 / FRAME_RATE  # [s] i3DPost's rate, for a take with a single stamp
 DECIMALS = 9                 # written decimals of metres, radians and degrees: nm and nrad, far below any error here
 
 WORLD_TO_BVH = BVH_TO_WORLD.T  # world (x, y, z) → BVH (x, z, −y): Y up

@@ -17,10 +17,10 @@ from dataclasses import dataclass, field
 
 from rclpy.serialization import serialize_message
 
+from mvpose_nodes.studio.i3dpost import FRAME_RATE
 from mvpose_nodes.io.bagfile import BagWriter
 from mvpose_nodes.ros.conversions import calibration_messages, skeleton_message
 
-FRAME_RATE = 25.0  # [Hz] i3DPost's
 FRAME_EPOCH_NS = 1_230_768_000_000_000_000  # stamp of frame 0 (2009-01-01, the year i3DPost was recorded)
 GROUND_TRUTH_TOPIC = '/mvpose/ground_truth'
 MARKER_CENTRES_TOPIC = '/mvpose/ground_truth/marker_centres'  # marker bags: 3D marker centres as a Skeleton

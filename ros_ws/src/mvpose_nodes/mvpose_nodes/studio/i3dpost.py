@@ -39,7 +39,7 @@ class I3dpostError(ValueError):
 
 
 CAMERAS = 8
-FRAMES_PER_SECOND = 25
+FRAME_RATE = 25.0   # [Hz] of i3DPost's cameras, and of every bag and motion the project makes
 NUMBERS_PER_CAMERA = 21  # 4 bounds + 4 intrinsics + k1 + 9 R + 3 t
 UNITS_PER_METRE = {'m': 1.0, 'mm': 1000.0}
 ROTATION_TOLERANCE = 1e-6  # max |RᵀR − I| element accepted as a rotation

@@ -2,7 +2,7 @@
 
 Sources: the BVH format (Biovision; hierarchy of ROOT/JOINT/End Site with OFFSET and CHANNELS, then
 MOTION rows), and the CMU Graphics Lab Motion Capture Database in B. Hahne's MotionBuilder-friendly
-BVH conversion (shipped in the package's share/mvpose_nodes/data/cmu with its README-cmu.txt: frame 1 of every file is an added T-pose facing
+BVH conversion (shipped in studio/cmu with its README-cmu.txt: frame 1 of every file is an added T-pose facing
 +Z, Y up, subject's left at +X, 120 fps).
 
 Project world: metres, z up, floor at z = 0. NumPy only (no rclpy), so tests and tools can use it
@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from mvpose_nodes.studio.i3dpost import FRAME_RATE
 from mvpose_nodes.body.model import JOINT_NAMES
 from mvpose_nodes.body.geometry import matrix_from_quaternion, rotation_between
 
@@ -43,9 +44,9 @@ CHANNEL_NAMES = ('Xposition', 'Yposition', 'Zposition', 'Xrotation', 'Yrotation'
 
 
 def cmu_directory():
-    """The CMU clips shipped with the package (share/mvpose_nodes/data/cmu)."""
-    from ament_index_python.packages import get_package_share_directory
-    return Path(get_package_share_directory('mvpose_nodes')) / 'data' / 'cmu'
+    """The CMU clips shipped with the package: package data of mvpose_nodes.studio (studio/cmu), so that
+    the studio finds them without ROS's ament index."""
+    return Path(__file__).resolve().parent / 'cmu'
 
 
 def cmu_clip(name):
@@ -322,7 +323,7 @@ def floor_levelling(ankles):
     return matrix_from_quaternion(rotation_between([-a, -b, 1.0], [0.0, 0.0, 1.0]))
 
 
-def retarget(bvh, height=1.75, frame_rate=25.0, first_frame=0):
+def retarget(bvh, height=1.75, frame_rate=FRAME_RATE, first_frame=0):
     """The motion of a CMU MotionBuilder-style BVH (frames 2..end, after the T-pose) as a BodyMotion.
 
     Axes BVH (x, y, z) → project (x, −z, y), scaled so that the T-pose stands `height` [m] tall (see
@@ -354,7 +355,7 @@ def retarget(bvh, height=1.75, frame_rate=25.0, first_frame=0):
                       toes=points[:, count:count + 2], hand_tips=points[:, count + 2:], head_forward=head_forward)
 
 
-def standing_motion(bvh, frames, height=1.75, frame_rate=25.0, first_frame=0, seed=0):
+def standing_motion(bvh, frames, height=1.75, frame_rate=FRAME_RATE, first_frame=0, seed=0):
     """A person standing still for `frames` frames, for initialisation tests, built from the subject's own
     bone lengths (T-pose, scaled as in retarget; left and right averaged): upright at the origin facing
     +x (left at +y), feet under the hips, legs straight, arms hanging with 10° of abduction, head upright,

@@ -10,6 +10,7 @@ rests at each keyframe. NumPy only.
 """
 import numpy as np
 
+from mvpose_nodes.studio.i3dpost import FRAME_RATE
 from mvpose_nodes.body.model import JOINT_INDEX, PARAMETER_INDEX, PARAMETER_NAMES
 from mvpose_nodes.body.kinematics import bone_lengths, forward_kinematics
 from mvpose_nodes.studio.mocap import ANKLE_HEIGHT_PER_HEIGHT, BodyMotion
@@ -66,7 +67,7 @@ def _parameters(angles, lengths, height):
     return parameters
 
 
-def phase_frames(frame_rate=25.0):
+def phase_frames(frame_rate=FRAME_RATE):
     """[(name, first frame, last frame)] of the occlusion script's phases (frame 0 = its start)."""
     ranges, start = [], 0.0
     for name, keys in PHASES:
@@ -76,7 +77,7 @@ def phase_frames(frame_rate=25.0):
     return ranges
 
 
-def occlusion_parameters(frame_rate=25.0, height=1.75):
+def occlusion_parameters(frame_rate=FRAME_RATE, height=1.75):
     """(F, 29) parameters of the occlusion script sampled at frame_rate [Hz]."""
     lengths = bone_lengths(height)
     times, keys = [], []
@@ -112,7 +113,7 @@ def body_points(parameters, height=1.75):
     return joints, np.array(toes), np.array(tips), frames['head'][:, 1]
 
 
-def occlusion_motion(frame_rate=25.0, height=1.75, first_frame=0, center=(0.0, 0.0)):
+def occlusion_motion(frame_rate=FRAME_RATE, height=1.75, first_frame=0, center=(0.0, 0.0)):
     """The occlusion script as a BodyMotion (see the module's docstring and phase_frames)."""
     points = [body_points(p, height) for p in occlusion_parameters(frame_rate, height)]
     joints, toes, tips, head_forward = (np.array(a) for a in zip(*points))

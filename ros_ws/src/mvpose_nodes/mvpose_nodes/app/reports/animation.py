@@ -13,6 +13,7 @@ from mvpose_nodes.app.reports.drawing import (FLOOR_STEP, FONT, draw_floor_grid,
 from mvpose_nodes.app.reports.sheets import NO_IMAGE_GREY, draw_legend
 from mvpose_nodes.body.model import JOINT_NAMES
 from mvpose_nodes.body.camera import intrinsics, look_at
+from mvpose_nodes.studio.i3dpost import FRAME_RATE
 
 
 def orbit_cameras(joint_sets, count, width, height, fps, degrees_per_second, start_azimuth_deg):
@@ -42,7 +43,7 @@ def write_strip(path, frames, limit=8, thumb_width=320):
     return write_png(path, np.concatenate(thumbs, axis=1))
 
 
-def animation(frames_of_joints, path, camera=None, images=None, fps=25, truth=None, frame_numbers=None,
+def animation(frames_of_joints, path, camera=None, images=None, fps=FRAME_RATE, truth=None, frame_numbers=None,
               width=640, degrees_per_second=12.0, start_azimuth_deg=-60.0):
     """An MP4 (fourcc 'mp4v', `fps` frames per second) of the fitted skeleton, one video frame per pose.
 

@@ -6,6 +6,7 @@ import math
 import cv2
 import numpy as np
 
+from mvpose_nodes.app.reports.accuracy import PAPER_MEAN_MM, TARGET_MEAN_MM
 from mvpose_nodes.app.reports.drawing import FONT, write_png
 from mvpose_nodes.body.model import JOINT_INDEX, JOINT_NAMES
 
@@ -57,7 +58,7 @@ def polyline_with_gaps(image, xs, ys, colour, thickness, markers):
             start = None
 
 
-def error_plot(per_frame_errors_mm, frame_numbers, path, paper_mean=44.4, target=25.0, per_joint=None,
+def error_plot(per_frame_errors_mm, frame_numbers, path, paper_mean=PAPER_MEAN_MM, target=TARGET_MEAN_MM, per_joint=None,
                title='Mean joint error per frame (paper 000 Eq. 12)', size=(1200, 600)):
     """Paper 000's Fig. 12 as a PNG of `size` (width, height) [px] (default 1200×600), white background.
 
