@@ -1,8 +1,15 @@
-from glob import glob
+import os
+from glob import glob as all_entries
 
 from setuptools import find_packages, setup
 
 PACKAGE = 'mvpose_nodes'
+
+
+def glob(pattern):
+    """The files matching pattern. colcon --symlink-install builds from a tree of links to the sources and
+    keeps the links of files since moved or deleted; those dangle, and installing one would fail."""
+    return [path for path in all_entries(pattern) if os.path.isfile(path)]
 
 # Every node and tool is a console script in lib/mvpose_nodes, where `ros2 run` finds it.
 EXECUTABLES = {
@@ -19,13 +26,14 @@ setup(
     name=PACKAGE,
     version='0.1.0',
     packages=find_packages(exclude=['test']),
+    # The studio's motion-capture clips travel with its code (no ament index needed to find them).
+    package_data={f'{PACKAGE}.studio': ['cmu/*']},
     data_files=[
         ('share/ament_index/resource_index/packages', [f'resource/{PACKAGE}']),
         (f'share/{PACKAGE}', ['package.xml']),
         (f'share/{PACKAGE}/config', glob('config/*.yaml')),
-        (f'share/{PACKAGE}/launch', glob('launch/*.py')),
+        (f'share/{PACKAGE}/launch', glob('launch/*.launch.yaml')),  # for `ros2 launch mvpose_nodes FILE`
         (f'share/{PACKAGE}/data', glob('data/*.npz')),
-        (f'share/{PACKAGE}/data/cmu', glob('data/cmu/*')),
     ],
     install_requires=['setuptools'],
     zip_safe=True,

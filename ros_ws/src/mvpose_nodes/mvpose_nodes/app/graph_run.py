@@ -33,9 +33,9 @@ class GraphRun:
 
 
 def launch_file():
-    """config/mvpose.launch.yaml of the checkout that runs."""
+    """launch/mvpose.launch.yaml of the checkout that runs (its default cameras are GRAPH_CAMERAS)."""
     from mvpose_nodes.app.main import repository_root
-    return repository_root() / 'ros_ws' / 'src' / 'mvpose_nodes' / 'config' / 'mvpose.launch.yaml'
+    return repository_root() / 'ros_ws' / 'src' / 'mvpose_nodes' / 'launch' / 'mvpose.launch.yaml'
 
 
 def run_graph(bag, log_path, rate=1.0, on_skeleton=None):
@@ -69,6 +69,8 @@ def run_graph(bag, log_path, rate=1.0, on_skeleton=None):
         node = rclpy.create_node('mvpose_graph_viewer')
 
         def fitted(message):
+            if message.status == Skeleton.STATUS_LOST:
+                return   # no fit for this frame set: the last pose repeated
             stamp = stamp_ns(message.header)
             run.fitted[stamp] = message
             if on_skeleton:

@@ -13,7 +13,7 @@ argument NAME. The file is in ros2 launch's YAML format, of which this subset is
         namespace: /cam$(var camera_a)   # optional
         param:                           # optional: params files and name/value pairs
           - from: $(find-pkg-share mvpose_nodes)/config/camera_features.yaml
-          - {name: cameras, value: [$(var camera_a), '5', '7']}
+          - {name: cameras, value: [$(var camera_a), 5, 7]}
         remap: [{from: image, to: image_raw}]   # optional
         args: --verbose                  # optional: extra arguments, placed before --ros-args
         output: screen                   # optional: screen or both (all output is printed anyway)

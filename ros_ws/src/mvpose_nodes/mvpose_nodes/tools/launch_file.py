@@ -11,7 +11,7 @@ The same file starts the same processes under `ros2 launch` on a system ROS 2 in
         namespace: /cam$(var camera_a)    # optional; a relative one is made absolute (/cam3)
         param:                            # optional, in this order on the command line:
           - from: $(find-pkg-share mvpose_nodes)/config/camera_features.yaml   # a params file
-          - {name: cameras, value: [$(var camera_a), '5', '7']}   # a value: -p cameras:=[3, 5, 7]
+          - {name: cameras, value: [$(var camera_a), 5, 7]}   # a value: -p cameras:=[3, 5, 7]
         remap: [{from: image, to: image_raw}]   # optional
         args: --verbose                   # optional: a command line, placed before --ros-args
         output: screen                    # optional: screen or both; every output is printed anyway
@@ -56,7 +56,7 @@ REMAP_KEYS = ('from', 'to')
 OUTPUTS = ('screen', 'both')
 SUBSTITUTIONS = ('var', 'env', 'find-pkg-share', 'find-pkg-prefix', 'exec-in-pkg', 'dirname')
 IDENTIFIER = re.compile(r'[A-Za-z][A-Za-z0-9_-]*')
-NAMESPACE = re.compile(r'(/[A-Za-z_][A-Za-z0-9_]*)+')
+NAMESPACE = re.compile(r'/|(/[A-Za-z_][A-Za-z0-9_]*)+')
 SCALARS = (bool, int, float, str)
 
 
@@ -166,15 +166,15 @@ def process_specs(actions, base_dir='.', source='launch description', arguments=
     unknown = [name for name in arguments if name not in declared]
     if unknown:
         raise UserError(f"{source}: no launch argument '{unknown[0]}' (declared: {', '.join(declared) or 'none'})")
-    variables, specs, places = dict(arguments), [], {}
+    variables, specs, arg_places, process_places = dict(arguments), [], {}, {}
+    substitute = Substitutions(variables, Path(base_dir))
     for kind, body, place in entities:
         try:
-            substitute = Substitutions(variables, Path(base_dir))
             if kind == 'arg':
                 argument = _argument(body)
-                if argument.name in places:
-                    raise UserError(f"launch argument '{argument.name}' declared twice (also {places[argument.name]})")
-                places[argument.name] = place
+                if argument.name in arg_places:
+                    raise UserError(f"launch argument '{argument.name}' declared twice (also {arg_places[argument.name]})")
+                arg_places[argument.name] = place
                 if argument.name not in variables:
                     if argument.default is None:
                         raise UserError(f"launch argument '{argument.name}' has no default: "
@@ -182,9 +182,9 @@ def process_specs(actions, base_dir='.', source='launch description', arguments=
                     variables[argument.name] = substitute(argument.default, 'default')
                 continue
             spec = _node(body, substitute) if kind == 'node' else _executable(body, substitute)
-            if spec.name in places:
-                raise UserError(f"duplicate name '{spec.name}' (also {places[spec.name]})")
-            places[spec.name] = place
+            if spec.name in process_places:
+                raise UserError(f"duplicate name '{spec.name}' (also {process_places[spec.name]})")
+            process_places[spec.name] = place
         except UserError as error:
             raise UserError(f'{source}: {place}: {error}') from None
         specs.append(spec)
@@ -229,7 +229,7 @@ def _string(body, key, required=False):
         return None
     value = body[key]
     if not isinstance(value, str):
-        hint = f" (quote it: '{value}')" if isinstance(value, (bool, int, float)) else ''
+        hint = f" (quote it: '{yaml_value(value)}')" if isinstance(value, (bool, int, float)) else ''
         raise UserError(f"'{key}' must be a string{hint}")
     return value
 
@@ -259,10 +259,13 @@ def _node(body, substitute):
         if not NAMESPACE.fullmatch(namespace):
             raise UserError(f"'namespace' is not a ROS namespace: '{namespace}'")
         command += ['-r', f'__ns:={namespace}']
-        name = f'{namespace}/{name}'  # the node's full name: unique where the plain name need not be
+        name = f"{namespace.rstrip('/')}/{name}"  # the node's full name: unique where the plain name need not be
     command += _parameter_arguments(body.get('param', []), substitute)
-    for remap in _mappings(body.get('remap', []), 'remap', REMAP_KEYS):
-        original, replacement = (substitute(_string(remap, key, required=True), f'remap {key}') for key in REMAP_KEYS)
+    for index, remap in enumerate(_mappings(body.get('remap', []), 'remap', REMAP_KEYS)):
+        try:
+            original, replacement = (substitute(_string(remap, key, required=True), key) for key in REMAP_KEYS)
+        except UserError as error:
+            raise UserError(f'remap[{index}]: {error}') from None
         command += ['-r', f'{original}:={replacement}']
     return ProcessSpec(name, command, _required(body, substitute))
 
@@ -278,7 +281,7 @@ def _executable(body, substitute):
 
 
 def _required(body, substitute):
-    """on_exit: shutdown (ros2 launch takes no other value) makes the process required; output is checked."""
+    """Whether the process is required (on_exit: shutdown, the one value ros2 launch takes); checks output too."""
     output = _string(body, 'output')
     if output is not None and substitute(output, 'output') not in OUTPUTS:
         raise UserError(f"'output' must be {' or '.join(OUTPUTS)} (every process's output is printed)")
@@ -349,7 +352,7 @@ def _parameter_arguments(params, substitute):
             if 'from' in param:
                 if set(param) != {'from'}:
                     raise UserError("'from' (a params file) goes alone, without 'name' or 'value'")
-                path = Path(os.path.abspath(substitute(_string(param, 'from'), 'from'))))
+                path = Path(os.path.abspath(substitute(_string(param, 'from'), 'from')))
                 if not path.is_file():
                     raise UserError(f'parameters file not found: {path}')
                 arguments += ['--params-file', str(path)]
@@ -383,10 +386,7 @@ def _parameter_value(value, substitute):
     items = [scalar(item) for item in value]
     if not items:
         raise UserError("'value' is an empty list (ROS cannot tell its type)")
-    types = {type(item) for item in items}
-    if types == {int, float}:
-        return [float(item) for item in items]
-    if len(types) > 1:
+    if len({type(item) for item in items}) > 1:   # launch_ros refuses [1, 2.5] too: write [1.0, 2.5]
         raise UserError(f"a list value's items must all have one type (bool, int, float or str); got {items}")
     return items
 

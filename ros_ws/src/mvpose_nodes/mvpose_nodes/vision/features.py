@@ -23,7 +23,7 @@ import numpy as np
 
 from mvpose_nodes.body.model import LABEL_NONE
 from mvpose_nodes.vision.contour import ContourLabels, label_contour
-from mvpose_nodes.vision.silhouette import chroma_key_foreground, clean_mask, silhouette_keypoints
+from mvpose_nodes.vision.silhouette import BLUENESS_THRESHOLD, chroma_key_foreground, clean_mask, silhouette_keypoints
 from mvpose_nodes.vision.skin import detect_skin, skin_regions
 
 ROLE_UNKNOWN, ROLE_FACE, ROLE_HAND, ROLE_FOREARM = range(4)   # SkinEllipse.ROLE_*
@@ -44,7 +44,7 @@ KEYPOINT_NAMES = ('root', 'head', 'neck', 'left_wrist', 'right_wrist', 'left_elb
 class FeatureSettings:
     """The parameters of the pipeline (the camera_features node's parameters, same names)."""
     silhouette_method: str = 'chroma'       # 'chroma' (blue screen) or 'background' (learned model)
-    blueness_threshold: int = 25            # [DN] chroma key: b − max(r, g) above it is blue screen
+    blueness_threshold: int = BLUENESS_THRESHOLD  # [DN] chroma key: b − max(r, g) above it is blue screen
     min_person_fraction: float = 0.001      # smallest person blob, as a share of the image area
     skin_threshold: float = 1.0             # log-likelihood ratio L above which a pixel is skin
     skin_min_area_fraction: float = 0.00003  # smallest skin region, as a share of the image area
