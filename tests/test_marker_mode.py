@@ -80,7 +80,7 @@ def test_identity_swaps_are_counted_once_per_swap():
 
 
 def test_marker_mode_in_the_graph(tmp_path, background, ros_context):
-    """Over DDS: three marker_tracker processes and marker_skeleton (config/markers.launch.yaml) on a small
+    """Over DDS: three marker_tracker processes and marker_skeleton (launch/markers.launch.yaml) on a small
     marker bag: every frame comes out as a skeleton, and the markers detected in two or more cameras are
     triangulated at their true centres (median within 2 cm; the others are named in status_message as
     predicted), and each tracker gets its camera's fused tracks back."""

@@ -1,6 +1,6 @@
 """`./mvpose bench [BAG]`: throughput and latency of the real graph over DDS, against the bag's decode floor.
 
-The graph of config/mvpose.launch.yaml (three camera_features and the skeleton_fitter) runs as separate
+The graph of launch/mvpose.launch.yaml (three camera_features and the skeleton_fitter) runs as separate
 processes, as in `./mvpose demo`. Instead of `bag play` at a fixed rate, this process publishes the bag
 closed-loop: the calibration (latched) first, then the frame sets' compressed images, keeping at most
 --window frame sets in flight (sent, no skeleton yet), so the graph runs as fast as it keeps up and no

@@ -1,7 +1,7 @@
 """`./mvpose demo`: the whole graph on the synthetic i3DPost walk, evaluated and drawn.
 
 Makes `bags/i3dpost_walk_synth` (cameras 3, 5, 7, frames 52–101, 1080p) when it is missing, starts
-three camera_features nodes and the skeleton_fitter as separate processes (config/mvpose.launch.yaml),
+three camera_features nodes and the skeleton_fitter as separate processes (launch/mvpose.launch.yaml),
 plays the bag to them over DDS with `bag play`, prints a line per fitted frame, records the fitted and
 true skeletons to a bag, prints paper 000's Table 2 beside the paper's numbers, and writes under one
 output folder: the per-frame error plot (paper Fig. 12), a contact sheet of the fitted skeleton over

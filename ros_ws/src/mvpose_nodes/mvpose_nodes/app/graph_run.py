@@ -1,6 +1,6 @@
 """One run of the whole mvpose graph on a camera bag over DDS (what `demo` and `bench` share).
 
-The launch file's nodes (three camera_features and the skeleton_fitter, config/mvpose.launch.yaml) run
+The launch file's nodes (three camera_features and the skeleton_fitter, launch/mvpose.launch.yaml) run
 as separate processes, supervised by launcher.Launch, their output going to a log file; `bag play`
 replays the bag's images, calibration and ground truth once every subscriber downstream is connected;
 a viewer node in this process receives /mvpose/skeleton and /mvpose/ground_truth, reports each fitted
@@ -15,7 +15,7 @@ from pathlib import Path
 from mvpose_nodes.tools.cli import UserError
 
 FEATURE_TOPICS = ('silhouette', 'skin_ellipses', 'labelled_contour')
-GRAPH_CAMERAS = (3, 5, 7)        # those of config/mvpose.launch.yaml
+GRAPH_CAMERAS = (3, 5, 7)        # the defaults of launch/mvpose.launch.yaml
 CONNECT_TIMEOUT = 60.0           # [s] for every node to start and every topic to connect
 QUIET_AFTER_PLAYBACK = 10.0      # [s] of no new skeleton after playback ends: the graph is done
 
