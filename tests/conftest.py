@@ -1,82 +1,131 @@
-"""Shared set-up of the mvpose tests: an isolated DDS domain on loopback, and helpers that run
-the real command-line tools as separate processes."""
+"""Shared set-up of the mvpose tests: the tiers, the environment each needs, and the shared fixtures.
+
+Every test has exactly one tier marker (registered in pytest.ini; a file of one tier says
+`pytestmark = pytest.mark.<tier>`); collection fails for a test with none or with two.
+
+Through the front door (`./mvpose test`: MVPOSE_ROOT set, the workspace sourced) every tier runs, in a
+DDS domain of its own on loopback. Anywhere else (plain `pytest`, `colcon test`) only the pure tier
+can run: mvpose_nodes is imported from its source tree, ROS packages refuse to import, and the files
+of the other tiers are not collected (the summary names them).
+
+Fixtures: background (./mvpose processes beside the test), ros_context (rclpy for the test process),
+synth_bag (./mvpose synth bags made once per session), cmu_walk (the CMU walk loaded once). Plain
+helpers are in common.py (re-exported here for `from conftest import run_mvpose`)."""
+import ast
+import configparser
+import dataclasses
+import importlib.abc
 import os
-import signal
-import subprocess
+import re
+import stat
 import sys
-import time
 from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parent.parent
-FRONT_DOOR = ROOT / 'mvpose'
+TESTS = Path(__file__).resolve().parent
+sys.path.insert(0, str(TESTS))  # common.py and samples.py, also for the scripts tests run in other processes
 
-if 'MVPOSE_ROOT' not in os.environ:
-    pytest.exit('run the tests through the front door: ./mvpose test', returncode=4)
+from common import (ROOT, Background, assert_one_line_error, mvpose_command,  # noqa: E402,F401 (re-exported)
+                    run_mvpose)
 
-# No DDS traffic leaves the machine in any test, and the tests do not see (or disturb) other
-# ROS graphs on it: a domain of their own, chosen per run.
-os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
-os.environ['ROS_DOMAIN_ID'] = str(1 + os.getpid() % 100)
-
-
-def mvpose_command(*args):
-    """The command line of `./mvpose ARGS` as a user types it."""
-    return [str(FRONT_DOOR), *map(str, args)]
+TIERS = ('pure', 'dds', 'graph', 'cli')
+ROS_ENVIRONMENT = 'MVPOSE_ROOT' in os.environ   # set by ./mvpose for the commands it runs
+# The top-level packages of ROS (in .venv too, but without a sourced workspace): not for the pure tier.
+ROS_PACKAGE = re.compile(r'rclpy|rcl|rcl_\w+|rmw\w*|rosidl_\w+|rosbag2_py|ament_index_python|rpyutils|launch|'
+                         r'launch_\w+|\w+_msgs|\w+_srvs|\w+_interfaces')
 
 
-def run_mvpose(*args, timeout=60, check=True):
-    """Run `./mvpose ARGS` to completion; the CompletedProcess (text output captured)."""
-    result = subprocess.run(mvpose_command(*args), capture_output=True, text=True, timeout=timeout, cwd=ROOT)
-    if check and result.returncode != 0:
-        raise AssertionError(f'./mvpose {" ".join(map(str, args))} exited {result.returncode}:\n'
-                             f'{result.stdout}\n{result.stderr}')
-    return result
+class RefuseRosImports(importlib.abc.MetaPathFinder):
+    """Without the ROS environment: an import of a ROS package fails, naming the rule it breaks."""
+
+    def find_spec(self, name, path=None, target=None):
+        if '.' not in name and ROS_PACKAGE.fullmatch(name):
+            raise ModuleNotFoundError(f"no ROS outside ./mvpose test: '{name}' may not be imported by a pure "
+                                      'test (a test that needs ROS is marked cli, dds or graph)', name=name)
+        return None
 
 
-class Background:
-    """A `./mvpose ARGS` process running beside the test; stopped with SIGINT like Ctrl-C."""
+if ROS_ENVIRONMENT:
+    # No DDS traffic leaves the machine in any test, and the tests do not see (or disturb) other
+    # ROS graphs on it: a domain of their own, chosen per run.
+    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+    os.environ['ROS_DOMAIN_ID'] = str(1 + os.getpid() % 100)
+else:
+    sys.path.insert(0, str(ROOT / 'ros_ws' / 'src' / 'mvpose_nodes'))
+    sys.meta_path.insert(0, RefuseRosImports())
 
-    def __init__(self, *args):
-        self.args = args
-        self.process = subprocess.Popen(mvpose_command(*args), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                                        text=True, cwd=ROOT, start_new_session=True)
+LEFT_OUT = []   # (test file or test, its tiers) not collected or deselected for want of ROS
 
-    def wait_for_stderr_line(self, fragment, timeout=20):
-        """Block until the process writes a stderr line containing `fragment`; all lines so far."""
-        lines = []
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            line = self.process.stderr.readline()
-            if not line and self.process.poll() is not None:
-                break
-            lines.append(line)
-            if fragment in line:
-                return lines
-        raise AssertionError(f'no stderr line with {fragment!r} from {self.args}: {lines}')
 
-    def finish(self, timeout=30):
-        """Wait for the process to end by itself; (returncode, stdout, stderr)."""
-        out, err = self.process.communicate(timeout=timeout)
-        return self.process.returncode, out, err
+# ---- the tiers ---------------------------------------------------------------------------------
 
-    def interrupt(self, timeout=30):
-        """Ctrl-C, then wait; (returncode, stdout, stderr)."""
-        if self.process.poll() is None:
-            os.killpg(self.process.pid, signal.SIGINT)
-        return self.finish(timeout)
+def pytest_configure(config):
+    """The tiers of pytest.ini also under another ini file (`colcon test` reads the package's setup.cfg)."""
+    registered = {line.split(':')[0].strip() for line in config.getini('markers')}
+    if not registered.issuperset(TIERS):
+        ini = configparser.ConfigParser(interpolation=None)
+        ini.read(TESTS / 'pytest.ini')
+        for line in ini['pytest']['markers'].strip().splitlines():
+            config.addinivalue_line('markers', line.strip())
 
-    def kill(self, grace=10):
-        """Ctrl-C first (a launch then stops its nodes, which run in sessions of their own), then SIGKILL."""
-        if self.process.poll() is None:
-            os.killpg(self.process.pid, signal.SIGINT)
-            try:
-                self.process.communicate(timeout=grace)
-            except subprocess.TimeoutExpired:
-                os.killpg(self.process.pid, signal.SIGKILL)
-                self.process.communicate()
 
+def tiers_of(item):
+    return {mark.name for mark in item.iter_markers() if mark.name in TIERS}
+
+
+def tiers_named_in(path):
+    """The tiers a test file names (`pytest.mark.<tier>` anywhere in it), read without importing it."""
+    return {node.attr for node in ast.walk(ast.parse(path.read_bytes(), str(path)))
+            if isinstance(node, ast.Attribute) and node.attr in TIERS
+            and isinstance(node.value, ast.Attribute) and node.value.attr == 'mark'}
+
+
+def pytest_ignore_collect(collection_path, config):
+    """Without ROS, a test file with no pure test is not imported (its imports need ROS)."""
+    if ROS_ENVIRONMENT or collection_path.suffix != '.py' or not collection_path.name.startswith('test_'):
+        return None
+    tiers = tiers_named_in(collection_path)
+    if tiers and 'pure' not in tiers:
+        LEFT_OUT.append((collection_path.name, tiers))
+        return True
+    return None
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_make_collect_report(collector):
+    """A test file or class whose tests do not each have exactly one tier fails to collect."""
+    report = yield
+    if report.passed and isinstance(collector, (pytest.Module, pytest.Class)):
+        wrong = {f'{item.originalname} ({", ".join(sorted(tiers_of(item))) or "no tier"})'
+                 for item in report.result if isinstance(item, pytest.Function) and len(tiers_of(item)) != 1}
+        if wrong:
+            report.outcome, report.result = 'failed', []
+            report.longrepr = (f'{collector.nodeid}: every test needs exactly one tier marker of '
+                               f'{", ".join(TIERS)} (see tests/pytest.ini); not so: {", ".join(sorted(wrong))}')
+    return report
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_collection_modifyitems(config, items):
+    """Without ROS, the tests of other tiers than pure in a file with pure tests are deselected."""
+    if ROS_ENVIRONMENT:
+        return
+    needing_ros = [item for item in items if tiers_of(item) != {'pure'}]
+    if needing_ros:
+        config.hook.pytest_deselected(items=needing_ros)
+        items[:] = [item for item in items if tiers_of(item) == {'pure'}]
+        LEFT_OUT.extend((item.nodeid, tiers_of(item)) for item in needing_ros)
+
+
+def pytest_terminal_summary(terminalreporter):
+    if LEFT_OUT:
+        names = ', '.join(f'{name} ({"/".join(sorted(tiers))})' for name, tiers in LEFT_OUT)
+        terminalreporter.write_line(f'Not run through ./mvpose test (MVPOSE_ROOT unset), so without ROS: the pure '
+                                    f'tier only; left out: {names}. `./mvpose test` runs every tier.', yellow=True)
+
+
+# ---- fixtures ----------------------------------------------------------------------------------
 
 @pytest.fixture
 def background():
@@ -100,14 +149,40 @@ def ros_context():
     rclpy.try_shutdown()
 
 
-def assert_one_line_error(result, *fragments):
-    """A user error: non-zero exit, exactly one line on stderr naming the problem, no traceback."""
-    assert result.returncode != 0, result
-    lines = [line for line in result.stderr.splitlines() if line.strip()]
-    assert len(lines) == 1, f'expected one error line, got:\n{result.stderr}'
-    assert 'Traceback' not in result.stderr + result.stdout
-    for fragment in fragments:
-        assert fragment in lines[0], f'{fragment!r} not in {lines[0]!r}'
+def make_read_only(path):
+    for folder, _, files in os.walk(path):
+        for name in files:
+            os.chmod(Path(folder, name), stat.S_IRUSR | stat.S_IRGRP | stat.S_IROTH)
+        os.chmod(folder, stat.S_IRUSR | stat.S_IXUSR | stat.S_IRGRP | stat.S_IXGRP | stat.S_IROTH | stat.S_IXOTH)
 
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
+@pytest.fixture(scope='session')
+def synth_bag(tmp_path_factory):
+    """synth_bag(ARGS...): the bag `./mvpose synth ARGS -o BAG` writes, made the first time a test asks for
+    these ARGS and shared for the rest of the session. It is read-only: a test that changes a bag copies it
+    first (shutil.copytree). Not for the tests of synth itself that compare separate runs."""
+    made = {}
+
+    def make(*args):
+        key = tuple(map(str, args))
+        if key not in made:
+            bag = tmp_path_factory.mktemp('synth') / 'bag'
+            run_mvpose('synth', *key, '-o', bag, timeout=300)
+            make_read_only(bag)
+            made[key] = bag
+        return made[key]
+    return make
+
+
+@pytest.fixture(scope='session')
+def cmu_walk():
+    """The CMU walk 07_01 retargeted to the body model (studio.mocap.retarget's defaults: 1.75 m, the
+    studio's frame rate), loaded once. Its arrays are read-only: take .placed(), .select() or copies."""
+    import numpy as np
+    from mvpose_nodes.studio.mocap import cmu_clip, load_bvh, retarget
+    motion = retarget(load_bvh(cmu_clip('07_01')))
+    for field in dataclasses.fields(motion):
+        value = getattr(motion, field.name)
+        if isinstance(value, np.ndarray):
+            value.setflags(write=False)
+    return motion

@@ -1,12 +1,14 @@
-"""`./mvpose bench`: its statistics on constructed numbers, its one-line errors, and one run of the real graph."""
+"""`./mvpose bench`: its statistics on constructed numbers. Its one-line errors: test_front_door.py; one run of
+the real graph: test_graph.py."""
 import math
 import os
 import re
 
 import pytest
 
-from conftest import assert_one_line_error, run_mvpose
 from mvpose_nodes.app import bench
+
+pytestmark = pytest.mark.pure
 
 
 def test_median_and_p95_interpolate_like_numpy():
@@ -82,35 +84,3 @@ def test_table_reports_rates_latencies_and_nodes():
     assert 'end-to-end / decode-only = 0.018' in table
     assert re.search(r'fit\s+200\.0\s+200\.0', table)
     assert re.search(r'skeleton_fitter\s+1\.5\s+75\s+200', table)
-
-
-def test_bad_input_is_one_line(tmp_path):
-    assert_one_line_error(run_mvpose('bench', '--window', 0, check=False), '--window must be at least 1')
-    assert_one_line_error(run_mvpose('bench', tmp_path / 'nothing', check=False), 'not found')
-    from rclpy.serialization import serialize_message
-    from sensor_msgs.msg import CameraInfo
-    from mvpose_nodes.io.bagfile import BagWriter
-    with BagWriter(tmp_path / 'cam3_only') as out:
-        out.add_topic('/cam3/camera_info', 'sensor_msgs/msg/CameraInfo')
-        out.write('/cam3/camera_info', serialize_message(CameraInfo()), 1)
-    assert_one_line_error(run_mvpose('bench', tmp_path / 'cam3_only', check=False),
-                          'lacks', '/cam3/image_raw/compressed', '/cam5/image_raw/compressed')
-
-
-@pytest.mark.timeout(150)
-def test_bench_runs_every_frame_set_through_the_graph(tmp_path):
-    bag = tmp_path / 'bag'
-    run_mvpose('synth', '--cameras', 3, 5, 7, '--frames', '70-73', '--resolution', '960x540', '-o', bag, timeout=60)
-    result = run_mvpose('bench', bag, '--window', 2, timeout=90)
-    table = result.stdout
-    assert '(4 frame sets, cameras 3 5 7, 960×540, window 2)' in table
-    assert '4 of 4 fitted, none dropped' in table
-    rate = float(re.search(r'end-to-end\s+([\d.]+) frame sets/s', table).group(1))
-    assert rate > 0
-    for stage in ('decode', 'features', 'sync wait', 'fit', 'end to end'):
-        assert re.search(rf'^    {stage}\s+\d+\.\d\s+\d+\.\d', table, re.MULTILINE), stage
-    for node in ('/cam3/camera_features', '/cam5/camera_features', '/cam7/camera_features', 'skeleton_fitter'):
-        row = re.search(rf'^    {re.escape(node)}\s+([\d.]+)\s+(\d+)\s+(\d+)$', table, re.MULTILINE)
-        assert row, f'{node} row missing:\n{table}'
-        assert float(row.group(3)) > 20     # peak RSS of a Python node with rclpy and numpy [MiB]
-    assert '[bench]' in result.stderr       # the progress bar

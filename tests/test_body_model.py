@@ -1,21 +1,18 @@
-"""Body-model names, labels and joint frames; paper 004's rotation between bone vectors."""
+"""Body-model names, labels and joint frames; paper 004's rotation between bone vectors. The labels
+against the message constants: test_messages.py."""
 import numpy as np
 import pytest
-from mvpose_msgs.msg import LabelledContour
 
 from mvpose_nodes.body import model
 from mvpose_nodes.body.geometry import matrix_from_quaternion, quaternion_from_matrix, rotation_about, rotation_between
+
+pytestmark = pytest.mark.pure
 
 
 def test_model_sizes_follow_paper_table_1():
     assert len(model.JOINT_NAMES) == 15 and len(model.BONES) == 14
     assert len(model.PARAMETER_NAMES) == 29 and len(set(model.PARAMETER_NAMES)) == 29
     assert {j for bone in model.BONES for j in bone} == set(model.JOINT_NAMES)
-
-
-def test_part_labels_equal_the_message_constants():
-    for name, value in model.PART_LABELS.items():
-        assert getattr(LabelledContour, f'LABEL_{name.upper()}') == value
 
 
 @pytest.mark.parametrize('seed', range(5))

@@ -1,11 +1,12 @@
 """The camera_features node over DDS: a small generated bag played into it, features out with the
-source stamps; bad input logged, answered with a status, and survived."""
+source stamps; bad input logged, answered with a status, and survived. Its one-line errors when it
+cannot start: test_front_door.py."""
 import time
 
 import numpy as np
 import pytest
 import rclpy
-from conftest import assert_one_line_error, run_mvpose
+from common import Publisher, run_mvpose, spin_for, spin_until
 from mvpose_msgs.msg import LabelledContour, SkinEllipseArray
 from rclpy.qos import DurabilityPolicy, QoSProfile
 from sensor_msgs.msg import CameraInfo, Image
@@ -13,16 +14,15 @@ from sensor_msgs.msg import CameraInfo, Image
 from mvpose_nodes.ros.camera_bag import frame_stamp_ns
 from mvpose_nodes.ros.conversions import stamp_ns
 
+pytestmark = pytest.mark.dds
+
 FRAMES = (60, 62)
 OUTPUTS = {'silhouette': Image, 'skin_ellipses': SkinEllipseArray, 'labelled_contour': LabelledContour}
 
 
 @pytest.fixture(scope='module')
-def small_bag(tmp_path_factory):
-    bag = tmp_path_factory.mktemp('node') / 'cam3'
-    run_mvpose('synth', '--cameras', 3, '--frames', f'{FRAMES[0]}-{FRAMES[1]}', '--resolution', '640x360',
-               '-o', bag, timeout=300)
-    return bag
+def small_bag(synth_bag):
+    return synth_bag('--cameras', 3, '--frames', f'{FRAMES[0]}-{FRAMES[1]}', '--resolution', '640x360')
 
 
 @pytest.fixture
@@ -44,13 +44,9 @@ class Listener:
 
     def wait_for_node(self):
         """Until the node's publishers are matched here (what is published before that is lost)."""
-        self.spin_until(lambda: all(self.node.count_publishers(f'/cam3/{name}') for name in OUTPUTS))
-        self.spin_until(lambda: False, timeout=0.5)
-
-    def spin_until(self, condition, timeout=60):
-        deadline = time.monotonic() + timeout
-        while not condition() and time.monotonic() < deadline:
-            rclpy.spin_once(self.node, timeout_sec=0.05)
+        spin_until(self.node, lambda: all(self.node.count_publishers(f'/cam3/{name}') for name in OUTPUTS), 60,
+                   "camera_features' publishers")
+        spin_for(self.node, 0.5)
 
     def close(self):
         self.node.destroy_node()
@@ -63,7 +59,8 @@ def test_node_publishes_all_three_features_with_the_source_stamps(small_bag, fea
         run_mvpose('bag', 'play', small_bag, '--topics', '/cam3/image_raw/compressed', '/cam3/camera_info',
                    '--wait-for-subscribers', '--delay', 0.5, timeout=120)
         frames = FRAMES[1] - FRAMES[0] + 1
-        listener.spin_until(lambda: all(len(v) >= frames for v in listener.received.values()))
+        spin_until(listener.node, lambda: all(len(v) >= frames for v in listener.received.values()), 60,
+                   f'{frames} messages on each output')
     finally:
         listener.close()
     expected = [frame_stamp_ns(n) for n in range(FRAMES[0], FRAMES[1] + 1)]
@@ -84,12 +81,12 @@ def test_bad_input_is_answered_with_a_status_and_the_node_keeps_running(features
     listener = Listener()
     node = listener.node
     latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
-    info_publisher = node.create_publisher(CameraInfo, '/cam3/camera_info', latched)
-    image_publisher = node.create_publisher(Image, '/cam3/image_raw', 10)
+    info_publisher = Publisher(node, CameraInfo, '/cam3/camera_info', latched)
+    image_publisher = Publisher(node, Image, '/cam3/image_raw', 10)
     try:
         listener.wait_for_node()
-        listener.spin_until(lambda: image_publisher.get_subscription_count() > 0)
-        info_publisher.publish(CameraInfo(width=64, height=48))
+        image_publisher.wait_for_subscribers(timeout=60)
+        info_publisher.publish(CameraInfo(width=64, height=48), timeout=60)
         time.sleep(0.5)
         bad_encoding = Image(width=64, height=48, encoding='mono16', step=128, data=bytes(64 * 48 * 2))
         wrong_size = Image(width=32, height=24, encoding='rgb8', step=96, data=bytes(32 * 24 * 3))
@@ -98,7 +95,7 @@ def test_bad_input_is_answered_with_a_status_and_the_node_keeps_running(features
         for stamp, message in enumerate((bad_encoding, wrong_size, empty_scene, bad_encoding)):
             message.header.stamp.sec = stamp + 1
             image_publisher.publish(message)
-        listener.spin_until(lambda: len(listener.received['labelled_contour']) >= 4)
+        spin_until(node, lambda: len(listener.received['labelled_contour']) >= 4, 60, '4 labelled contours')
     finally:
         listener.close()
     statuses = [(m.header.stamp.sec, m.status) for m in listener.received['labelled_contour']]
@@ -106,14 +103,3 @@ def test_bad_input_is_answered_with_a_status_and_the_node_keeps_running(features
                         (3, LabelledContour.STATUS_NO_PERSON), (4, LabelledContour.STATUS_BAD_INPUT)]
     assert 'mono16' in listener.received['skin_ellipses'][0].status_message
     assert '32×24' in listener.received['skin_ellipses'][1].status_message
-
-
-def test_node_outside_a_camera_namespace_is_a_one_line_error():
-    result = run_mvpose('run', 'camera_features', check=False, timeout=60)
-    assert_one_line_error(result, '/cam<K>')
-
-
-def test_bad_parameter_is_a_one_line_error():
-    result = run_mvpose('run', 'camera_features', '--ros-args', '-r', '__ns:=/cam3', '-p', 'sleeves:=medium',
-                        check=False, timeout=60)
-    assert_one_line_error(result, 'sleeves')

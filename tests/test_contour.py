@@ -12,6 +12,8 @@ from mvpose_nodes.body.model import (LABEL_HEAD, LABEL_LEFT_HAND, LABEL_LEFT_LEG
 from mvpose_nodes.vision.contour import (SIDE_A, SIDE_B, SIDE_NONE, contour_graph, label_contour, outer_contour,
                                   shortest_path)
 
+pytestmark = pytest.mark.pure
+
 ROWS, COLS = 1080, 1920
 # Image-left leg (the person's right, facing the camera) and image-right leg: centre lines, 60 px thick.
 LEG_IMAGE_LEFT = ((915, 590), (820, 1000))

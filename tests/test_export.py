@@ -1,22 +1,19 @@
-"""`export`: the recorded motion as CSV, JSON and BVH. The BVH's own forward kinematics gives the joints
-back, its channels are the model's parameters, CSV and JSON parse back to the recorded values, and the
-command works on a bag and refuses bad input in one line."""
+"""`export`'s formats: the recorded motion as CSV, JSON and BVH. The BVH's own forward kinematics gives the
+joints back, its channels are the model's parameters, and CSV and JSON parse back to the recorded values.
+The command on a bag and its one-line errors: test_commands.py."""
 import csv
 import io
 import json
 
 import numpy as np
 import pytest
-from conftest import assert_one_line_error, run_mvpose
-from rclpy.serialization import serialize_message
 
-from mvpose_msgs.msg import Skeleton
-from mvpose_nodes.io.bagfile import BagWriter
 from mvpose_nodes.body.model import BONES, JOINT_NAMES, PARAMETER_NAMES
 from mvpose_nodes.body.kinematics import JOINT_INDEX, PARAMETER_INDEX, bone_lengths, euler_matrix, forward_kinematics
-from mvpose_nodes.studio.mocap import BVH_TO_WORLD, cmu_clip, elementary_rotations, load_bvh, retarget
-from mvpose_nodes.io.motion_export import (STATUS_NAMES, Motion, read_bvh, write_csv, write_json, write_motion)
-from mvpose_nodes.ros.conversions import skeleton_message
+from mvpose_nodes.studio.mocap import BVH_TO_WORLD, elementary_rotations, load_bvh
+from mvpose_nodes.io.motion_export import Motion, read_bvh, write_csv, write_json, write_motion
+
+pytestmark = pytest.mark.pure
 
 EPOCH_NS = 1_230_768_000_000_000_000  # 2009-01-01, the synthetic bags' epoch
 FRAME_NS = 40_000_000                 # 25 fps
@@ -134,11 +131,11 @@ def test_bvh_without_parameters_takes_the_roll_from_inverse_kinematics(tmp_path)
             assert np.allclose((yz + 180) % 360 - 180, 0, atol=1e-6), hinge
 
 
-def test_bvh_of_a_mocap_walk_keeps_every_bone_direction(tmp_path):
+def test_bvh_of_a_mocap_walk_keeps_every_bone_direction(tmp_path, cmu_walk):
     """Joints that are not the model's (the CMU walk: uneven shoulders, bone lengths that vary over the
     take through resampling): every bone points exactly where it was recorded, the root is exact, and a
     joint is off by no more than the length deviations from the median along its chain."""
-    joints = retarget(load_bvh(cmu_clip('07_01'))).joints[:40]
+    joints = cmu_walk.joints[:40]
     path = tmp_path / 'walk.bvh'
     write_motion(motion_of(joints), path, 'bvh')
     back, _ = read_bvh(path)
@@ -191,74 +188,3 @@ def test_csv_and_json_parse_back():
     assert frames[2]['stamp'] == pytest.approx(1230768000.080000001, abs=1e-6)
     assert np.array_equal(np.array([f['joints'] for f in frames]), joints)  # JSON floats round-trip exactly
     assert frames[2]['parameters'] is None and np.array_equal(frames[3]['parameters'], parameters[3])
-
-
-def test_status_names_are_the_message_constants():
-    assert STATUS_NAMES == {Skeleton.STATUS_OK: 'OK', Skeleton.STATUS_INITIALISING: 'INITIALISING',
-                            Skeleton.STATUS_DEGRADED: 'DEGRADED', Skeleton.STATUS_LOST: 'LOST'}
-
-
-def write_skeleton_bag(path, joints, parameters, extra_topics=()):
-    """A recorded bag: /mvpose/skeleton with the parameters and a status, /mvpose/ground_truth without
-    them (written in reverse order: export sorts by stamp), plus empty extra topics {name: type}."""
-    with BagWriter(path) as out:
-        out.add_topic('/mvpose/skeleton', 'mvpose_msgs/msg/Skeleton')
-        out.add_topic('/mvpose/ground_truth', 'mvpose_msgs/msg/Skeleton')
-        for topic, type_name in extra_topics:
-            out.add_topic(topic, type_name)
-        for frame in range(len(joints)):
-            stamp = EPOCH_NS + frame * FRAME_NS
-            message = skeleton_message(joints[frame], stamp, parameter_names=list(PARAMETER_NAMES),
-                                       parameters=parameters[frame].tolist(), status=frame % 3,
-                                       status_message=f'frame {frame}')
-            out.write('/mvpose/skeleton', serialize_message(message), stamp)
-        for frame in reversed(range(len(joints))):
-            stamp = EPOCH_NS + frame * FRAME_NS
-            out.write('/mvpose/ground_truth', serialize_message(skeleton_message(joints[frame], stamp)), stamp)
-
-
-def test_export_command_writes_the_three_formats(tmp_path):
-    rng = np.random.default_rng(11)
-    parameters, joints = random_model_motion(rng, 6)
-    bag = tmp_path / 'recorded'
-    write_skeleton_bag(bag, joints, parameters)
-
-    result = run_mvpose('export', bag, '-o', tmp_path / 'out' / 'motion.csv')  # format from the suffix
-    assert '6 frames of /mvpose/skeleton' in result.stderr
-    rows = list(csv.reader(open(tmp_path / 'out' / 'motion.csv')))
-    assert len(rows) == 7 and [row[1] for row in rows[1:]] == ['0', '1', '2', '0', '1', '2']
-    np.testing.assert_allclose(np.array([row[47:] for row in rows[1:]], dtype=float), parameters, atol=1e-9)
-
-    run_mvpose('export', bag, '--format', 'json', '-o', tmp_path / 'truth.txt', '--topic', '/mvpose/ground_truth')
-    document = json.loads((tmp_path / 'truth.txt').read_text())
-    assert document['source']['topic'] == '/mvpose/ground_truth'
-    assert [f['stamp_ns'] for f in document['frames']] == [EPOCH_NS + k * FRAME_NS for k in range(6)]
-    np.testing.assert_allclose([f['joints'] for f in document['frames']], joints, atol=1e-12)
-    assert all(f['parameters'] is None for f in document['frames'])
-
-    result = run_mvpose('export', bag, '--format', 'bvh', '-o', tmp_path / 'motion.bvh')
-    assert 'frame time 40.0 ms' in result.stderr and 'within 0.000 mm' in result.stderr
-    back, frame_time = read_bvh(tmp_path / 'motion.bvh')
-    assert np.abs(back - joints).max() < 1e-6 and frame_time == pytest.approx(0.04)
-
-
-def test_export_bad_input_is_a_one_line_error(tmp_path):
-    rng = np.random.default_rng(5)
-    parameters, joints = random_model_motion(rng, 2)
-    bag = tmp_path / 'recorded'
-    write_skeleton_bag(bag, joints, parameters, extra_topics=[('/camera_pose', 'geometry_msgs/msg/PoseStamped')])
-    existing = tmp_path / 'existing.csv'
-    existing.write_text('keep me\n')
-
-    def error(*args):
-        return run_mvpose('export', *args, check=False)
-    assert_one_line_error(error(tmp_path / 'nowhere', '--format', 'csv', '-o', tmp_path / 'a.csv'),
-                          str(tmp_path / 'nowhere'), 'no such file')
-    assert_one_line_error(error(bag, '--topic', '/nothing', '-o', tmp_path / 'a.csv'), str(bag), '/nothing')
-    assert_one_line_error(error(bag, '--topic', '/camera_pose', '-o', tmp_path / 'a.csv'),
-                          '/camera_pose', 'geometry_msgs/msg/PoseStamped', 'not mvpose_msgs/msg/Skeleton')
-    assert_one_line_error(error(bag, '--format', 'fbx', '-o', tmp_path / 'a.fbx'), "invalid choice: 'fbx'")
-    assert_one_line_error(error(bag, '-o', tmp_path / 'a.txt'), '--format')
-    assert_one_line_error(error(bag, '-o', existing), str(existing), 'already exists', 'another -o')
-    assert existing.read_text() == 'keep me\n'
-    assert not (tmp_path / 'a.csv').exists()

@@ -8,6 +8,8 @@ from mvpose_nodes.studio.i3dpost import I3dpostError
 from mvpose_nodes.studio.i3dpost import (available, find_sequence, frame_path, parse_frame_range, read_calibration,
                                   read_frame, write_calibration, write_frame)
 
+pytestmark = pytest.mark.pure
+
 
 def distorted_rig():
     """The 8-camera studio with k1 on cameras 2 and 5 (the only distortion term the format holds)."""

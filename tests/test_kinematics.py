@@ -8,6 +8,8 @@ from mvpose_nodes.body.geometry import normalize, quaternion_from_matrix, rotati
 from mvpose_nodes.body.kinematics import (BONES, JOINT_INDEX, PARAMETER_INDEX, bone_lengths, euler_from_quaternion,
                                      euler_matrix, forward_kinematics, inverse_kinematics)
 
+pytestmark = pytest.mark.pure
+
 
 def constrained_euler(direction, zero_angle):
     """The older IK step that paper 004 improves on: the Euler angles (rx, ry, rz) that turn a limb's

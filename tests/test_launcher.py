@@ -20,6 +20,8 @@ import yaml
 from mvpose_nodes.tools.launch import Launch, load_launch_file, main, process_specs
 from mvpose_nodes.tools.launch_file import package_prefix
 
+pytestmark = pytest.mark.cli
+
 LAUNCH_DIR = Path(__file__).resolve().parent.parent / 'ros_ws' / 'src' / 'mvpose_nodes' / 'launch'
 
 # A stand-in process: prints 'ready' once its signal handling is in place, then exits or waits.
@@ -480,7 +482,9 @@ def test_the_shipped_launch_files_start_a_node_per_camera_and_one_fusing_them(ca
         assert [line[1].split('/')[-2:] for line in lines] == [['mvpose_nodes', tracker]] * 3 + [['mvpose_nodes', fusion]]
         assert [line[2:] for line in lines[:3]] == [['--ros-args', '-r', f'__node:={tracker}', '-r', f'__ns:=/cam{k}',
                                                      '--params-file', str(params_file), *remap] for k in cameras]
-        assert lines[-1][2:] == ['--ros-args', '-r', f'__node:={fusion}', '-p', f'cameras:={cameras}']
+        fusion_params = params_file.with_name(f'{fusion}.yaml')   # its defaults first, then the launch's cameras
+        assert lines[-1][2:] == ['--ros-args', '-r', f'__node:={fusion}', '--params-file', str(fusion_params),
+                                 '-p', f'cameras:={cameras}']
     assert all(spec.required for spec in load_launch_file(LAUNCH_DIR / file_name))  # on_exit: shutdown, each
 
 

@@ -1,21 +1,18 @@
-"""The synthetic marker suit (paper 001): red markers on the 15 joints rendered by the ray caster,
-their per-camera ground truth (true projection, visible or hidden) and the scripted occlusions."""
+"""The synthetic studio without a bag: the walk of the paper's frames in the paper's cameras, and the marker
+suit (paper 001): red markers on the 15 joints rendered by the ray caster, their per-camera ground truth
+(true projection, visible or hidden) and the scripted occlusions. The bags synth writes: test_synth.py."""
 import cv2
 import numpy as np
 import pytest
-from conftest import assert_one_line_error, run_mvpose
-from rclpy.serialization import deserialize_message
-from rosbags.highlevel import AnyReader
 
 from mvpose_nodes.studio import scene
-from mvpose_nodes.io.bagfile import BagReader
 from mvpose_nodes.body.model import JOINT_INDEX, JOINT_NAMES
 from mvpose_nodes.body.camera import studio_rig
-from mvpose_nodes.ros.camera_bag import MARKER_CENTRES_TOPIC, camera_topics, frame_sets
-from mvpose_nodes.io.interfaces import message_class
 from mvpose_nodes.studio.scripted_motion import occlusion_motion, phase_frames
 from mvpose_nodes.app.synth import make_motion
 from types import SimpleNamespace
+
+pytestmark = pytest.mark.pure
 
 CAMERAS = (3, 5, 7)
 
@@ -106,43 +103,16 @@ def test_occlusion_script_hides_the_head_behind_the_hand():
     assert motion.toes[..., 2].min() > -0.01
 
 
-def test_synth_markers_bag(tmp_path):
-    bag = tmp_path / 'occlusions'
-    run_mvpose('synth', '--markers', '--motion', 'occlusions', '--frames', '42-45', '--resolution', '960x540',
-               '--cameras', *CAMERAS, '-o', bag, timeout=300)
-    contents = {}
-    for info, _, data in BagReader(bag).messages():
-        contents.setdefault(info.name, []).append((info.type, deserialize_message(data, message_class(info.type))))
-    for k in CAMERAS:
-        topic = camera_topics(k)['markers']
-        assert [t for t, _ in contents[topic]] == ['mvpose_msgs/msg/MarkerTracks'] * 4
-        images = [m for _, m in contents[camera_topics(k)['image']]]
-        for (_, message), image in zip(contents[topic], images):
-            assert message.header.stamp == image.header.stamp and message.header.frame_id == image.header.frame_id
-            assert message.status == 0 and list(message.names) == list(JOINT_NAMES)
-            assert len(message.x) == len(message.y) == len(message.flags) == 15
-            assert set(message.flags) <= {message.FLAG_DETECTED, message.FLAG_PREDICTED}
-            assert 6 <= list(message.flags).count(message.FLAG_DETECTED) < 15
-            assert all(0 <= x < 960 for x in message.x) and all(0 <= y < 540 for y in message.y)
-    assert MARKER_CENTRES_TOPIC in contents and len(contents['/mvpose/ground_truth']) == 4
-    with AnyReader([bag]) as reader:
-        connections = [c for c in reader.connections if c.topic == camera_topics(5)['markers']]
-        message = reader.deserialize(next(reader.messages(connections=connections))[2], connections[0].msgtype)
-        assert list(message.names) == list(JOINT_NAMES)
-    sets = list(frame_sets(bag))
-    assert [s.frame for s in sets] == [42, 43, 44, 45]
-    for frame_set in sets:
-        pixels, visible = frame_set.markers[5]
-        assert pixels.shape == (15, 2) and visible.dtype == bool
-        assert not visible[JOINT_INDEX['head']], f'frame {frame_set.frame}: the hand hides the head marker from camera 5'
-        assert visible[JOINT_INDEX['pelvis']] and visible[JOINT_INDEX['left_knee']]
-        # The shirt is not red: the rendered image is red at visible markers only.
-        image = frame_set.images[5]
-        for (x, y), seen in zip(pixels, visible):
-            if seen:
-                assert red(image[int(round(y)) - 1:int(round(y)) + 2, int(round(x)) - 1:int(round(x)) + 2]).any()
-
-
-def test_red_shirt_with_markers_is_refused(tmp_path):
-    result = run_mvpose('synth', '--markers', '--shirt', 'red', '-o', tmp_path / 'x', check=False)
-    assert_one_line_error(result, '--shirt red')
+def test_whole_walk_of_the_paper_frames_stays_in_the_paper_cameras():
+    """Frames 52–101 at 1080p: the whole person (joints, toes, fingertips, hair above the vertex)
+    is inside the image of cameras 3, 5 and 7, as in the paper's choice of frames and cameras."""
+    from types import SimpleNamespace
+    from mvpose_nodes.body.camera import studio_rig
+    from mvpose_nodes.app.synth import make_motion
+    motion = make_motion(SimpleNamespace(frames='52-101', clip='07_01', motion='walk', height=1.75, seed=0))
+    points = np.concatenate([motion.joints, motion.toes, motion.hand_tips], axis=1).reshape(-1, 3)
+    for camera in studio_rig(cameras=CAMERAS):
+        pixels, depth = camera.project(points)
+        assert np.all(depth > 0)
+        assert pixels[:, 0].min() > 20 and pixels[:, 0].max() < 1900, camera.number
+        assert pixels[:, 1].min() > 40 and pixels[:, 1].max() < 1060, camera.number

@@ -7,16 +7,17 @@ import pytest
 from mvpose_nodes.body.camera import studio_rig
 from mvpose_nodes.markers.views import LIMB_PARENT, MarkerViews
 from mvpose_nodes.markers.detection import FLAG_DETECTED, FLAG_PREDICTED, MARKER_NAMES
-from mvpose_nodes.studio.mocap import cmu_clip, load_bvh, retarget
+
+pytestmark = pytest.mark.pure
 
 WRIST, OTHER_WRIST = MARKER_NAMES.index('left_wrist'), MARKER_NAMES.index('right_wrist')
 HEAD = MARKER_NAMES.index('head')
 
 
 @pytest.fixture(scope='module')
-def walk():
+def walk(cmu_walk):
     """(F, 15, 3) [m]: 20 frames of a captured walk (CMU 07_01), markers at the joints."""
-    return retarget(load_bvh(cmu_clip('07_01'))).placed().joints[10:30]
+    return cmu_walk.placed().joints[10:30]
 
 
 @pytest.fixture(scope='module')

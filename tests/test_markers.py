@@ -11,6 +11,8 @@ from mvpose_nodes.markers.detection import (FLAG_DETECTED, FLAG_LOST, FLAG_PREDI
 from mvpose_nodes.markers.regions import RegionTracker, assign_group, assign_head, similarity_complete
 from mvpose_nodes.markers.tracking import MarkerTracker, NearestNeighbourTracker
 
+pytestmark = pytest.mark.pure
+
 BLUE = (30, 40, 200)
 RED = (220, 20, 25)
 SHAPE = (260, 320)

@@ -8,6 +8,8 @@ from mvpose_nodes.studio import mocap
 from mvpose_nodes.body.model import JOINT_NAMES
 from mvpose_nodes.studio.mocap import MotionFileError
 
+pytestmark = pytest.mark.pure
+
 CLIP_FRAMES = {'07_01': 317, '07_02': 330, '08_08': 284}
 # 08_08 is a fast walk (2.2 m/s at 1.75 m) on a capture floor that rises by about 8 cm over the clip, so
 # with the floor set by the lowest ankle its toe dips 3 cm below z = 0 in the first frame: the walking-speed

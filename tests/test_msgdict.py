@@ -17,6 +17,8 @@ from mvpose_nodes.io.msgdict import (FieldError, get_message_field, message_to_c
                                   message_to_ordereddict, message_to_yaml, message_type_name,
                                   set_message_fields)
 
+pytestmark = pytest.mark.cli
+
 
 def header(sec=1, nanosec=2, frame_id='world'):
     return Header(stamp=Time(sec=sec, nanosec=nanosec), frame_id=frame_id)

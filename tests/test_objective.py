@@ -15,6 +15,8 @@ from mvpose_nodes.fitting.objective import (SEGMENT_POINTS, _camera_cost, bounda
                                             segment_points)
 from mvpose_nodes.body.triangulation import best_assignment, triangulate
 
+pytestmark = pytest.mark.pure
+
 
 def limb_cost_brute_force(segments, contour_labels, label, n=SEGMENT_POINTS, enclosure_weight=0.0):
     """limb_cost computed directly from the boundary point lists (min over all boundary pixels), for tests.

@@ -13,6 +13,8 @@ from mvpose_nodes.app.reports.drawing import COLOURS, JOINT_DOT, draw_skeleton
 from mvpose_nodes.app.reports.plots import error_plot
 from mvpose_nodes.app.reports.sheets import NO_IMAGE_GREY, contact_sheet
 
+pytestmark = pytest.mark.pure
+
 BLUE = (30, 60, 200)  # RGB of the test images
 
 

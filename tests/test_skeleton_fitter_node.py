@@ -1,11 +1,13 @@
 """The skeleton_fitter node over DDS, fed features computed here from rendered studio views: a frame set
-that two cameras see is fitted; one that only one camera sees gets STATUS_LOST with the last pose."""
+that two cameras see is fitted; one that only one camera sees gets STATUS_LOST with the last pose. Bad
+calibration and malformed contours are logged and dropped, and the node keeps running."""
 import math
 import time
 
 import numpy as np
 import pytest
 import rclpy
+from common import Publisher, run_mvpose, spin_until, wait_for_graph
 from mvpose_msgs.msg import LabelledContour, Skeleton, SkinEllipseArray
 from sensor_msgs.msg import Image
 
@@ -13,10 +15,9 @@ from mvpose_nodes.body.camera import studio_rig
 from mvpose_nodes.ros.camera_bag import frame_stamp_ns
 from mvpose_nodes.ros.conversions import (calibration_messages, empty_feature_messages, feature_messages,
                                           joints_from_skeleton, optical_frame, set_stamp, stamp_ns)
-from mvpose_nodes.ros.helpers import LATCHED, wait_for_acknowledgements
+from mvpose_nodes.ros.helpers import LATCHED
 from mvpose_nodes.ros.params import default_skin_model_path
 from mvpose_nodes.studio import scene
-from mvpose_nodes.studio.mocap import cmu_clip, load_bvh, retarget
 from mvpose_nodes.vision.features import FeatureExtractor, FeatureSettings
 from mvpose_nodes.vision.skin import SkinModel
 
@@ -27,9 +28,9 @@ FEATURES = {'silhouette': Image, 'skin_ellipses': SkinEllipseArray, 'labelled_co
 
 
 @pytest.fixture(scope='module')
-def rendered_features():
+def rendered_features(cmu_walk):
     """{camera: (Camera, features.Features)} of one walking frame seen by cameras 3 and 5 at 960×540."""
-    motion = retarget(load_bvh(cmu_clip('07_01'))).placed(heading=math.radians(45))
+    motion = cmu_walk.placed(heading=math.radians(45))
     i = len(motion.joints) // 2
     pose = scene.BodyPose(motion.joints[i], motion.toes[i], motion.hand_tips[i], motion.head_forward[i])
     extractor = FeatureExtractor(FeatureSettings(), SkinModel.load(default_skin_model_path()))
@@ -43,32 +44,27 @@ def rendered_features():
     return found
 
 
-def spin_until(node, condition, timeout, what):
-    deadline = time.monotonic() + timeout
-    while not condition() and time.monotonic() < deadline:
-        rclpy.spin_once(node, timeout_sec=0.05)
-    assert condition(), f'timed out after {timeout} s waiting for {what}'
-
-
 def test_a_frame_set_seen_by_one_camera_gets_status_lost_with_the_last_pose(rendered_features, background,
                                                                               ros_context):
     fitter = background('run', 'skeleton_fitter', '--ros-args', '-p', f'cameras:={list(CAMERAS)}')
     node = rclpy.create_node('fitter_feeder')
     received = []
     node.create_subscription(Skeleton, '/mvpose/skeleton', received.append, LATCHED)
-    publishers = {(k, topic): node.create_publisher(kind, f'/cam{k}/{topic}', 10)
+    publishers = {(k, topic): Publisher(node, kind, f'/cam{k}/{topic}', 10)
                   for k in CAMERAS for topic, kind in FEATURES.items()}
     try:
-        spin_until(node, lambda: all(p.get_subscription_count() for p in publishers.values()), 30,
-                   'skeleton_fitter to subscribe to the features')
+        for publisher in publishers.values():
+            publisher.wait_for_subscribers(timeout=30)
         first, second = frame_stamp_ns(60), frame_stamp_ns(61)
         calibration = []
         for k, (camera, _) in rendered_features.items():
             for message, topic in zip(calibration_messages(camera, first), ('camera_info', 'camera_pose')):
-                calibration.append(node.create_publisher(type(message), f'/cam{k}/{topic}', LATCHED))
-                calibration[-1].publish(message)
-        spin_until(node, lambda: all(p.get_subscription_count() for p in calibration), 30, 'calibration subscribers')
-        wait_for_acknowledgements(calibration, timeout_sec=10.0)
+                # Latched: published at once, the fitter gets it when it subscribes.
+                calibration.append(Publisher(node, type(message), f'/cam{k}/{topic}', LATCHED)
+                                   .publish(message, subscribers=0))
+        for publisher in calibration:
+            publisher.wait_for_subscribers(timeout=30)
+            publisher.wait_for_acknowledgements(timeout=10)
         time.sleep(0.5)   # acknowledged by the fitter's DDS reader: let its executor take them before features
         for stamp in (first, second):
             for k, (camera, features) in rendered_features.items():
@@ -91,3 +87,31 @@ def test_a_frame_set_seen_by_one_camera_gets_status_lost_with_the_last_pose(rend
     np.testing.assert_allclose(joints_from_skeleton(lost), joints_from_skeleton(fitted), atol=1e-9)
     code, _, err = fitter.interrupt()
     assert code == 0, err
+
+
+def test_skeleton_fitter_node_survives_nan_calibration_and_malformed_contours(background, ros_context):
+    """Over DDS: a NaN camera_info and a contour whose arrays disagree are logged with the topic and the
+    cause, and dropped; the node keeps running (it still answers Ctrl-C with exit 0)."""
+    fitter = background('run', 'skeleton_fitter', '--ros-args', '-p', 'cameras:=[3, 5]')
+    wait_for_graph([])
+    nan_info = ("{header: {frame_id: cam3}, width: 1920, height: 1080, distortion_model: plumb_bob, "
+                "k: [.nan, 0, 960, 0, 1400, 540, 0, 0, 1], d: [0, 0, 0, 0, 0]}")
+    pose = "{header: {frame_id: world}, pose: {orientation: {w: 1.0}}}"
+    qos = ('--qos-durability', 'transient_local', '-w', 1, '--once')
+    run_mvpose('topic', 'pub', '/cam3/camera_info', 'sensor_msgs/msg/CameraInfo', nan_info, *qos)
+    run_mvpose('topic', 'pub', '/cam3/camera_pose', 'geometry_msgs/msg/PoseStamped', pose, *qos)
+    run_mvpose('topic', 'pub', '/cam5/camera_info', 'sensor_msgs/msg/CameraInfo', nan_info.replace('.nan', '1400'), *qos)
+    run_mvpose('topic', 'pub', '/cam5/camera_pose', 'geometry_msgs/msg/PoseStamped', pose, *qos)
+    stamp = '{header: {stamp: {sec: 5}}'
+    for k in (3, 5):  # one frame set whose contours have 3 pixels but 1 label
+        run_mvpose('topic', 'pub', f'/cam{k}/silhouette', 'sensor_msgs/msg/Image', stamp + '}', '-w', 1, '--once')
+        run_mvpose('topic', 'pub', f'/cam{k}/skin_ellipses', 'mvpose_msgs/msg/SkinEllipseArray', stamp + '}',
+                   '-w', 1, '--once')
+        run_mvpose('topic', 'pub', f'/cam{k}/labelled_contour', 'mvpose_msgs/msg/LabelledContour',
+                   stamp + ', x: [1, 2, 3], y: [1, 2, 3], labels: [1], sides: [1]}', '-w', 1, '--once')
+    import time
+    time.sleep(2.0)
+    code, _, err = fitter.interrupt()
+    assert code == 0, err
+    assert '/cam3 calibration unusable: camera_info K is not a valid intrinsic matrix' in err, err
+    assert '/cam5/labelled_contour: LabelledContour x, y, labels and sides differ in length; dropped' in err, err

@@ -11,6 +11,8 @@ import pytest
 
 from mvpose_nodes.vision.skin import BINS, SkinModel, SkinModelError, detect_skin, mask_counts, scores_of_counts, skin_regions
 
+pytestmark = pytest.mark.pure
+
 
 def f1_score(predicted, truth):
     """(precision, recall, F1) of a bool predicted mask against a bool truth mask of the same

@@ -7,6 +7,8 @@ import pytest
 
 from mvpose_nodes.fitting.sync import ApproximateTimeSynchronizer
 
+pytestmark = pytest.mark.pure
+
 MS = 1_000_000
 PERIOD_NS = 40 * MS
 JITTER_NS = 3 * MS

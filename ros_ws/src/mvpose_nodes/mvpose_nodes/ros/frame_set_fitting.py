@@ -1,0 +1,81 @@
+"""One synchronised frame set of feature messages -> one mvpose_msgs/Skeleton, as the skeleton_fitter
+node publishes it. The node only wires topics to this; `./mvpose eval suite` calls the same code on
+features it computes itself, so the suite measures exactly what the node would publish.
+
+The status (Skeleton.STATUS_*): INITIALISING on a frame that (re)started the fit from the keypoints;
+DEGRADED when a configured camera gave nothing usable or a stage had no evidence; LOST when fewer than
+two cameras see the person (the joints repeat the last fitted pose; nothing before the first fit);
+OK otherwise.
+"""
+from dataclasses import dataclass
+
+from mvpose_msgs.msg import LabelledContour, Skeleton
+
+from mvpose_nodes.body.kinematics import forward_kinematics
+from mvpose_nodes.body.model import PARAMETER_NAMES
+from mvpose_nodes.fitting.fitter import SkeletonFitter, view_from_features
+from mvpose_nodes.ros.conversions import (contour_from_message, keypoints_from_messages, skeleton_message,
+                                          stage_messages)
+
+
+@dataclass
+class FrameSetResult:
+    """What one frame set gave: the Skeleton to publish (None: nothing to publish), its 29 parameters,
+    and problems [(cause, text)] worth logging once per cause."""
+    message: object = None
+    parameters: object = None
+    problems: list = None
+
+
+class FrameSetFitter:
+    """The skeleton fitter behind the node: `settings` (fitting.settings.FitterSettings) and the
+    configured camera numbers."""
+
+    def __init__(self, settings, cameras):
+        self.fitter = SkeletonFitter(settings)
+        self.cameras = list(cameras)
+
+    def fit(self, stamp_ns, features, missing_cameras=()):
+        """features: {camera number: (body.camera.Camera or None while its calibration is missing,
+        SkinEllipseArray, LabelledContour)} of the cameras that sent this frame set; missing_cameras:
+        configured cameras left out by the synchroniser (silent). A FrameSetResult."""
+        problems, views = [], []
+        for number in self.cameras:
+            if number not in features:
+                continue
+            camera, ellipses, contour = features[number]
+            if camera is None or contour.status != LabelledContour.STATUS_OK:
+                continue
+            try:
+                labels = contour_from_message(contour)
+            except ValueError as error:
+                problems.append((f'contour {number}', f'/cam{number}/labelled_contour: {error}; dropped'))
+                continue
+            views.append(view_from_features(camera, keypoints_from_messages(ellipses, contour), labels,
+                                            ellipses.face_visibility))
+        if len(views) < 2:
+            return self.lost(stamp_ns, problems, 'few views', f'fewer than 2 cameras with a person at {stamp_ns} ns')
+        try:
+            fit = self.fitter.fit(stamp_ns / 1e9, views)
+        except ValueError as error:
+            return self.lost(stamp_ns, problems, 'fit', f'no fit at {stamp_ns} ns: {error}')
+        used = {v.camera.number for v in views}
+        degraded = bool(missing_cameras) or used != set(self.cameras) or not all(s.fitted for s in fit.stages)
+        status = (Skeleton.STATUS_INITIALISING if fit.initialised
+                  else Skeleton.STATUS_DEGRADED if degraded else Skeleton.STATUS_OK)
+        reason = f'cameras used: {sorted(used)}' if degraded else ''
+        message = skeleton_message(fit.joints, stamp_ns, parameter_names=list(PARAMETER_NAMES),
+                                   parameters=fit.parameters.tolist(), stages=stage_messages(fit.stages),
+                                   status=status, status_message=reason, fit_time=fit.seconds)
+        return FrameSetResult(message, fit.parameters, problems)
+
+    def lost(self, stamp_ns, problems, cause, reason):
+        """STATUS_LOST repeating the last fitted pose (no message before the first fit)."""
+        problems.append((cause, f'{reason} (logged once; STATUS_LOST with the last pose while it lasts)'))
+        parameters = self.fitter.parameters
+        if parameters is None:
+            return FrameSetResult(None, None, problems)
+        joints, _ = forward_kinematics(parameters, self.fitter.lengths)
+        message = skeleton_message(joints, stamp_ns, parameter_names=list(PARAMETER_NAMES),
+                                   parameters=parameters.tolist(), status=Skeleton.STATUS_LOST, status_message=reason)
+        return FrameSetResult(message, parameters, problems)

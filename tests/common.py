@@ -1,0 +1,146 @@
+"""Plain helpers of the mvpose tests (fixtures are in conftest.py): the ./mvpose commands run as a user
+runs them, and, for the tests that talk over DDS themselves, spinning a node until something holds,
+publishing once subscribers matched, and waiting for the graph to connect.
+
+Importing this module imports no ROS package (rclpy is imported where it is used), so the pure tier and
+the publisher scripts that tests start in other processes can use it too."""
+import os
+import signal
+import subprocess
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+FRONT_DOOR = ROOT / 'mvpose'
+
+
+# ---- the front door as separate processes ------------------------------------------------------
+
+def mvpose_command(*args):
+    """The command line of `./mvpose ARGS` as a user types it."""
+    return [str(FRONT_DOOR), *map(str, args)]
+
+
+def run_mvpose(*args, timeout=60, check=True):
+    """Run `./mvpose ARGS` to completion; the CompletedProcess (text output captured)."""
+    result = subprocess.run(mvpose_command(*args), capture_output=True, text=True, timeout=timeout, cwd=ROOT)
+    if check and result.returncode != 0:
+        raise AssertionError(f'./mvpose {" ".join(map(str, args))} exited {result.returncode}:\n'
+                             f'{result.stdout}\n{result.stderr}')
+    return result
+
+
+class Background:
+    """A `./mvpose ARGS` process running beside the test; stopped with SIGINT like Ctrl-C."""
+
+    def __init__(self, *args):
+        self.args = args
+        self.process = subprocess.Popen(mvpose_command(*args), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                        text=True, cwd=ROOT, start_new_session=True)
+
+    def wait_for_stderr_line(self, fragment, timeout=20):
+        """Block until the process writes a stderr line containing `fragment`; all lines so far."""
+        lines = []
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            line = self.process.stderr.readline()
+            if not line and self.process.poll() is not None:
+                break
+            lines.append(line)
+            if fragment in line:
+                return lines
+        raise AssertionError(f'no stderr line with {fragment!r} from {self.args}: {lines}')
+
+    def finish(self, timeout=30):
+        """Wait for the process to end by itself; (returncode, stdout, stderr)."""
+        out, err = self.process.communicate(timeout=timeout)
+        return self.process.returncode, out, err
+
+    def interrupt(self, timeout=30):
+        """Ctrl-C, then wait; (returncode, stdout, stderr)."""
+        if self.process.poll() is None:
+            os.killpg(self.process.pid, signal.SIGINT)
+        return self.finish(timeout)
+
+    def kill(self, grace=10):
+        """Ctrl-C first (a launch then stops its nodes, which run in sessions of their own), then SIGKILL."""
+        if self.process.poll() is None:
+            os.killpg(self.process.pid, signal.SIGINT)
+            try:
+                self.process.communicate(timeout=grace)
+            except subprocess.TimeoutExpired:
+                os.killpg(self.process.pid, signal.SIGKILL)
+                self.process.communicate()
+
+
+def assert_one_line_error(result, *fragments):
+    """A user error: non-zero exit, exactly one line on stderr naming the problem, no traceback."""
+    assert result.returncode != 0, result
+    lines = [line for line in result.stderr.splitlines() if line.strip()]
+    assert len(lines) == 1, f'expected one error line, got:\n{result.stderr}'
+    assert 'Traceback' not in result.stderr + result.stdout
+    for fragment in fragments:
+        assert fragment in lines[0], f'{fragment!r} not in {lines[0]!r}'
+
+
+# ---- DDS from the test process (rclpy initialised: the ros_context fixture, or rclpy.init()) -----
+
+def spin_until(node, condition, timeout, what):
+    """Spin `node` until `condition()` holds; fails naming `what` was awaited when `timeout` [s] passes first."""
+    import rclpy
+    deadline = time.monotonic() + timeout
+    while not condition() and time.monotonic() < deadline:
+        rclpy.spin_once(node, timeout_sec=0.05)
+    assert condition(), f'timed out after {timeout} s waiting for {what}'
+
+
+def spin_for(node, seconds):
+    """Spin `node` for `seconds`, taking whatever arrives meanwhile."""
+    import rclpy
+    deadline = time.monotonic() + seconds
+    while time.monotonic() < deadline:
+        rclpy.spin_once(node, timeout_sec=min(0.05, max(deadline - time.monotonic(), 0.0)))
+
+
+class Publisher:
+    """Publishes from the test process on one topic with a given QoS (a depth, or a QoSProfile), once the
+    wanted number of subscriptions matched: what a volatile publisher sends before that is lost."""
+
+    def __init__(self, node, message_type, topic, qos=10):
+        self.node, self.topic = node, topic
+        self.publisher = node.create_publisher(message_type, topic, qos)
+
+    def wait_for_subscribers(self, count=1, timeout=30):
+        """Spin the node until `count` subscriptions matched this publisher."""
+        spin_until(self.node, lambda: self.publisher.get_subscription_count() >= count, timeout,
+                   f'{count} subscriber(s) on {self.topic}')
+        return self
+
+    def publish(self, *messages, subscribers=1, timeout=30, interval=0.0):
+        """Wait for `subscribers` matched subscriptions, then publish `messages`, `interval` [s] apart."""
+        self.wait_for_subscribers(subscribers, timeout)
+        for index, message in enumerate(messages):
+            if index and interval:
+                time.sleep(interval)
+            self.publisher.publish(message)
+        return self
+
+    def wait_for_acknowledgements(self, timeout=5):
+        """Until every reliable subscriber acknowledged what was published (or `timeout` [s]): before a
+        publishing process exits. True when all were acknowledged."""
+        from rclpy.duration import Duration
+        return self.publisher.wait_for_all_acked(Duration(seconds=timeout))
+
+
+def wait_for_graph(topics_with_both_ends, timeout=60):
+    """Until every topic has a publisher and a subscriber in the graph, then a moment for them to match:
+    the player waits for its own subscribers only, not for the nodes downstream of them."""
+    import rclpy
+    node = rclpy.create_node('graph_watcher')
+    try:
+        spin_until(node, lambda: all(node.count_publishers(t) and node.count_subscribers(t)
+                                     for t in topics_with_both_ends), timeout,
+                   f'a publisher and a subscriber on each of {topics_with_both_ends}')
+        time.sleep(1.0)
+    finally:
+        node.destroy_node()

@@ -1,0 +1,159 @@
+"""The commands that work on bags and files offline (no DDS), run as a user runs them: `eval` prints
+Table 2, `export` writes CSV, JSON and BVH, `skin train`, `features eval` and `features bench`, and
+`markers eval` comparing the three marker methods; their bad input is one line."""
+import csv
+import json
+
+import cv2
+import numpy as np
+import pytest
+from common import assert_one_line_error, run_mvpose
+from rclpy.serialization import serialize_message
+from test_export import EPOCH_NS, FRAME_NS, random_model_motion
+from test_features import BLUE
+
+from mvpose_nodes.body.model import PARAMETER_NAMES
+from mvpose_nodes.io.bagfile import BagWriter
+from mvpose_nodes.io.motion_export import read_bvh
+from mvpose_nodes.ros.conversions import skeleton_message
+from mvpose_nodes.vision.skin import SkinModel
+
+pytestmark = pytest.mark.cli
+
+
+def test_eval_prints_table_2_for_a_known_offset(tmp_path, cmu_walk):
+    motion = cmu_walk
+    bag = tmp_path / 'recorded'
+    with BagWriter(bag) as out:
+        out.add_topic('/mvpose/skeleton', 'mvpose_msgs/msg/Skeleton')
+        out.add_topic('/mvpose/ground_truth', 'mvpose_msgs/msg/Skeleton')
+        for frame in range(5):
+            stamp = 10**18 + frame * 40_000_000
+            truth = motion.joints[frame]
+            out.write('/mvpose/ground_truth', serialize_message(skeleton_message(truth, stamp)), stamp)
+            out.write('/mvpose/skeleton', serialize_message(skeleton_message(truth + [0.010, 0, -0.020], stamp)), stamp)
+    table = run_mvpose('eval', bag).stdout
+    mean_row = next(line for line in table.splitlines() if line.strip().startswith('mean'))
+    cells = mean_row.split()
+    assert cells[1].startswith('10.0±0.0') and cells[2].startswith('0.0±0.0') and cells[3].startswith('20.0±0.0')
+    assert float(cells[4]) == pytest.approx(np.hypot(10, 20), abs=0.05) and cells[5] == '44.4'
+    assert '5 frames matched' in table
+
+
+def write_skeleton_bag(path, joints, parameters, extra_topics=()):
+    """A recorded bag: /mvpose/skeleton with the parameters and a status, /mvpose/ground_truth without
+    them (written in reverse order: export sorts by stamp), plus empty extra topics {name: type}."""
+    with BagWriter(path) as out:
+        out.add_topic('/mvpose/skeleton', 'mvpose_msgs/msg/Skeleton')
+        out.add_topic('/mvpose/ground_truth', 'mvpose_msgs/msg/Skeleton')
+        for topic, type_name in extra_topics:
+            out.add_topic(topic, type_name)
+        for frame in range(len(joints)):
+            stamp = EPOCH_NS + frame * FRAME_NS
+            message = skeleton_message(joints[frame], stamp, parameter_names=list(PARAMETER_NAMES),
+                                       parameters=parameters[frame].tolist(), status=frame % 3,
+                                       status_message=f'frame {frame}')
+            out.write('/mvpose/skeleton', serialize_message(message), stamp)
+        for frame in reversed(range(len(joints))):
+            stamp = EPOCH_NS + frame * FRAME_NS
+            out.write('/mvpose/ground_truth', serialize_message(skeleton_message(joints[frame], stamp)), stamp)
+
+
+def test_export_command_writes_the_three_formats(tmp_path):
+    rng = np.random.default_rng(11)
+    parameters, joints = random_model_motion(rng, 6)
+    bag = tmp_path / 'recorded'
+    write_skeleton_bag(bag, joints, parameters)
+
+    result = run_mvpose('export', bag, '-o', tmp_path / 'out' / 'motion.csv')  # format from the suffix
+    assert '6 frames of /mvpose/skeleton' in result.stderr
+    rows = list(csv.reader(open(tmp_path / 'out' / 'motion.csv')))
+    assert len(rows) == 7 and [row[1] for row in rows[1:]] == ['0', '1', '2', '0', '1', '2']
+    np.testing.assert_allclose(np.array([row[47:] for row in rows[1:]], dtype=float), parameters, atol=1e-9)
+
+    run_mvpose('export', bag, '--format', 'json', '-o', tmp_path / 'truth.txt', '--topic', '/mvpose/ground_truth')
+    document = json.loads((tmp_path / 'truth.txt').read_text())
+    assert document['source']['topic'] == '/mvpose/ground_truth'
+    assert [f['stamp_ns'] for f in document['frames']] == [EPOCH_NS + k * FRAME_NS for k in range(6)]
+    np.testing.assert_allclose([f['joints'] for f in document['frames']], joints, atol=1e-12)
+    assert all(f['parameters'] is None for f in document['frames'])
+
+    result = run_mvpose('export', bag, '--format', 'bvh', '-o', tmp_path / 'motion.bvh')
+    assert 'frame time 40.0 ms' in result.stderr and 'within 0.000 mm' in result.stderr
+    back, frame_time = read_bvh(tmp_path / 'motion.bvh')
+    assert np.abs(back - joints).max() < 1e-6 and frame_time == pytest.approx(0.04)
+
+
+def test_export_bad_input_is_a_one_line_error(tmp_path):
+    rng = np.random.default_rng(5)
+    parameters, joints = random_model_motion(rng, 2)
+    bag = tmp_path / 'recorded'
+    write_skeleton_bag(bag, joints, parameters, extra_topics=[('/camera_pose', 'geometry_msgs/msg/PoseStamped')])
+    existing = tmp_path / 'existing.csv'
+    existing.write_text('keep me\n')
+
+    def error(*args):
+        return run_mvpose('export', *args, check=False)
+    assert_one_line_error(error(tmp_path / 'nowhere', '--format', 'csv', '-o', tmp_path / 'a.csv'),
+                          str(tmp_path / 'nowhere'), 'no such file')
+    assert_one_line_error(error(bag, '--topic', '/nothing', '-o', tmp_path / 'a.csv'), str(bag), '/nothing')
+    assert_one_line_error(error(bag, '--topic', '/camera_pose', '-o', tmp_path / 'a.csv'),
+                          '/camera_pose', 'geometry_msgs/msg/PoseStamped', 'not mvpose_msgs/msg/Skeleton')
+    assert_one_line_error(error(bag, '--format', 'fbx', '-o', tmp_path / 'a.fbx'), "invalid choice: 'fbx'")
+    assert_one_line_error(error(bag, '-o', tmp_path / 'a.txt'), '--format')
+    assert_one_line_error(error(bag, '-o', existing), str(existing), 'already exists', 'another -o')
+    assert existing.read_text() == 'keep me\n'
+    assert not (tmp_path / 'a.csv').exists()
+
+
+def test_skin_train_command_and_its_errors(tmp_path):
+    folder = tmp_path / 'pairs'
+    folder.mkdir()
+    image = np.full((60, 80, 3), BLUE[::-1], np.uint8)
+    image[20:40, 30:50] = (110, 140, 200)  # BGR skin-like patch
+    mask = np.zeros((60, 80), np.uint8)
+    mask[20:40, 30:50] = 255
+    cv2.imwrite(str(folder / 'a.png'), image)
+    cv2.imwrite(str(folder / 'a_skin.png'), mask)
+    run_mvpose('skin', 'train', folder, '-o', tmp_path / 'model.npz')
+    model = SkinModel.load(tmp_path / 'model.npz')
+    assert model.skin_counts.sum() == 400
+    assert model.likelihood(cv2.cvtColor(image, cv2.COLOR_BGR2RGB))[30, 40] > 0
+    assert_one_line_error(run_mvpose('skin', 'train', tmp_path / 'nothing', '-o', tmp_path / 'x.npz', check=False),
+                          'nothing')
+
+
+def test_eval_and_bench_commands_print_their_tables(synth_bag):
+    bag = synth_bag('--cameras', 5, '--frames', '70-71', '--resolution', '640x360')
+    table = run_mvpose('features', 'eval', bag).stdout
+    assert 'silhouette IoU' in table and 'skin' in table and 'contour labels' in table
+    head_row = next(line for line in table.splitlines() if line.split()[:1] == ['head'])
+    assert head_row.split()[1] == '2/2'
+    bench = run_mvpose('features', 'bench', bag).stdout
+    assert 'pipeline (all stages)' in bench and 'JPEG decode' in bench
+
+
+def test_markers_eval_compares_the_three_methods(tmp_path, synth_bag):
+    """`./mvpose markers eval` on a short marker bag prints a row per method, the fused one from the same
+    code as the graph; a bag without markers is refused in one line naming it."""
+    bag = synth_bag('--markers', '--cameras', 3, 5, 7, '--frames', '60-63', '--resolution', '960x540')
+    out = run_mvpose('markers', 'eval', bag, '--pictures', tmp_path / 'pictures', timeout=300).stdout
+    totals = out[out.index('  totals'):].splitlines()[1:4]
+    rows = {line[:25].strip(): [float(v) for v in line[25:].replace('/', ' ').split()] for line in totals}
+    assert set(rows) == {'nearest neighbour', 'regions (paper 001)', 'regions + 3D fusion'}, out
+    # What the views buy: the fused 3D markers are nearer the truth than either method's own triangulation.
+    visible, hidden, swaps, mean_3d, max_3d = rows['regions + 3D fusion']
+    assert 0 <= visible < 5 and mean_3d < min(rows['nearest neighbour'][3], rows['regions (paper 001)'][3]), out
+    # The pictures: a tile per camera, the detected markers' green dots on them.
+    import cv2
+    pictures = sorted((tmp_path / 'pictures').glob('markers_frame*_*.png'))
+    assert [p.name.rsplit('_', 1)[-1] for p in pictures].count('worst.png') == 1 and len(pictures) == 2, out
+    for picture in pictures:
+        assert f'wrote {picture}' in out
+        rgb = cv2.cvtColor(cv2.imread(str(picture)), cv2.COLOR_BGR2RGB)
+        assert rgb.shape[1] == 3 * 560
+        assert np.sum(np.all(np.abs(rgb.astype(int) - (60, 220, 60)) < 12, axis=2)) > 3 * 50
+    plain = synth_bag('--cameras', 3, 5, '--frames', '60-60', '--resolution', '480x270')
+    result = run_mvpose('markers', 'eval', plain, check=False)
+    assert result.returncode != 0
+    assert f"bag '{plain}' has no ground-truth markers" in result.stderr and len(result.stderr.strip().splitlines()) == 1

@@ -1,0 +1,87 @@
+"""The camera-feature pipeline with what the package installs in its share directory: the shipped skin
+model on a rendered studio frame against its ground truth (chroma key, learned background, no person),
+and the shipped parameter defaults."""
+import math
+
+import numpy as np
+import pytest
+
+from mvpose_nodes.body.camera import studio_rig
+from mvpose_nodes.body.model import JOINT_NAMES
+from mvpose_nodes.ros.params import CAMERA_FEATURES, ParameterError, default_skin_model_path, load_feature_settings
+from mvpose_nodes.vision.features import FeatureExtractor, FeatureSettings
+from mvpose_nodes.vision.silhouette import BackgroundModel
+from mvpose_nodes.vision.skin import SkinModel
+
+pytestmark = pytest.mark.cli
+
+
+@pytest.fixture(scope='module')
+def studio_frame(cmu_walk):
+    """One 960×540 view of the synthetic studio with its ground truth, rendered here."""
+    from mvpose_nodes.studio import scene
+    motion = cmu_walk.placed(heading=math.radians(45))
+    i = len(motion.joints) // 2
+    pose = scene.BodyPose(motion.joints[i], motion.toes[i], motion.hand_tips[i], motion.head_forward[i])
+    camera = studio_rig((960, 540), cameras=[3])[0]
+    view = scene.prepare_camera(camera)
+    rendering = scene.render(view, pose, scene.Appearance(), scene.shadow_map(
+        scene.body_primitives(pose, scene.Appearance()), pose.joints[0, :2]), pose.joints[0, :2])
+    rgb, labels = scene.Realism().finish(rendering, view, 3, 0, 0)
+    empty, _ = scene.Realism().finish(scene.Rendering(view.background, np.zeros_like(labels)), view, 3, 0, 0)
+    return rgb, labels, camera, pose, empty
+
+
+def extractor(settings=FeatureSettings(), background=None):
+    return FeatureExtractor(settings, SkinModel.load(default_skin_model_path()), background)
+
+
+def check_against_truth(features, labels, camera, pose, min_iou=0.95):
+    from mvpose_nodes.studio.scene import SKIN_BIT
+    truth_person = (labels & ~np.uint8(SKIN_BIT)) > 0
+    iou = (features.silhouette & truth_person).sum() / (features.silhouette | truth_person).sum()
+    assert iou > min_iou
+    truth_skin = (labels & SKIN_BIT) > 0
+    assert (features.skin & truth_skin).sum() > 0.8 * truth_skin.sum()
+    pixels, _ = camera.project(pose.joints)
+    head = features.keypoints['head']
+    assert np.hypot(head.x - pixels[JOINT_NAMES.index('head')][0], head.y - pixels[JOINT_NAMES.index('head')][1]) < 8
+    assert len(features.contour.points) > 100 and (features.contour.labels > 0).mean() > 0.5
+
+
+def test_pipeline_on_a_studio_frame_against_its_ground_truth(studio_frame):
+    rgb, labels, camera, pose, _ = studio_frame
+    features = extractor()(rgb)
+    assert features.person
+    check_against_truth(features, labels, camera, pose)
+    assert {e.role for e in features.ellipses} >= {1}, 'the face ellipse is found'
+
+
+def test_pipeline_with_a_learned_background(studio_frame):
+    rgb, labels, camera, pose, empty = studio_frame
+    rng = np.random.default_rng(1)
+    frames = [np.clip(empty + rng.normal(0, 2, empty.shape), 0, 255).astype(np.uint8) for _ in range(8)]
+    features = extractor(FeatureSettings(silhouette_method='background'), BackgroundModel.from_frames(frames))(rgb)
+    # Without the blue screen the edges are less clean (the person is only 15 000 px at this size), and
+    # the floor shadow must be told from the person by its colour: a lower bar than the chroma key's.
+    check_against_truth(features, labels, camera, pose, min_iou=0.9)
+
+
+def test_no_person_gives_empty_features(studio_frame):
+    features = extractor()(studio_frame[4])
+    assert not features.person and not features.silhouette.any()
+    assert not any(k.visible for k in features.keypoints.values())
+
+
+def test_parameter_defaults_agree_and_bad_values_are_one_line_errors(tmp_path):
+    defaults = {p.name: p.default for p in CAMERA_FEATURES}
+    assert load_feature_settings() == FeatureSettings(**{k: v for k, v in defaults.items()
+                                                 if k in FeatureSettings.__dataclass_fields__})
+    for text, fragment in (("/**: {ros__parameters: {sleeves: medium}}", 'sleeves'),
+                           ("/**: {ros__parameters: {blueness_threshold: 999}}", 'blueness_threshold'),
+                           ("/**: {ros__parameters: {colour: 3}}", 'unknown parameter'),
+                           ("just text", 'not a ROS params file')):
+        path = tmp_path / 'params.yaml'
+        path.write_text(text)
+        with pytest.raises(ParameterError, match=fragment):
+            load_feature_settings(path)
