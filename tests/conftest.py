@@ -10,7 +10,7 @@ of the other tiers are not collected (the summary names them).
 
 Fixtures: background (./mvpose processes beside the test), ros_context (rclpy for the test process),
 synth_bag (./mvpose synth bags made once per session), cmu_walk (the CMU walk loaded once). Plain
-helpers are in common.py (re-exported here for `from conftest import run_mvpose`)."""
+helpers are in common.py."""
 import ast
 import configparser
 import dataclasses
@@ -26,8 +26,7 @@ import pytest
 TESTS = Path(__file__).resolve().parent
 sys.path.insert(0, str(TESTS))  # common.py and samples.py, also for the scripts tests run in other processes
 
-from common import (ROOT, Background, assert_one_line_error, mvpose_command,  # noqa: E402,F401 (re-exported)
-                    run_mvpose)
+from common import ROOT, Background, run_mvpose  # noqa: E402 (after the sys.path entry it needs)
 
 TIERS = ('pure', 'dds', 'graph', 'cli')
 ROS_ENVIRONMENT = 'MVPOSE_ROOT' in os.environ   # set by ./mvpose for the commands it runs

@@ -5,7 +5,7 @@ import cv2
 import numpy as np
 import pytest
 
-from mvpose_nodes.studio import scene
+from mvpose_nodes.studio import palette, scene
 from mvpose_nodes.body.model import JOINT_INDEX, JOINT_NAMES
 from mvpose_nodes.body.camera import studio_rig
 from mvpose_nodes.studio.scripted_motion import occlusion_motion, phase_frames
@@ -39,7 +39,7 @@ def finished(camera, pose, appearance):
 def test_red_shows_exactly_at_the_visible_markers(skin_tone):
     walk = make_motion(SimpleNamespace(frames='52-61', clip='07_01', motion='walk', height=1.75, seed=0))
     pose = pose_at(walk, 3)
-    appearance = scene.Appearance(skin=scene.SKIN_TONES[skin_tone], shirt=scene.SHIRTS['green'], markers=True)
+    appearance = scene.Appearance(skin=palette.SKIN_TONES[skin_tone], shirt=palette.SHIRTS['green'], markers=True)
     for camera in studio_rig((960, 540), cameras=CAMERAS):
         rgb, labels, marker_ids = finished(camera, pose, appearance)
         pixels, fractions, visible = scene.marker_visibility(camera, pose, appearance)
@@ -63,7 +63,7 @@ def test_the_red_test_sees_a_red_shirt():
     """The colour rule above is not blind: the walk's usual red shirt trips it."""
     walk = make_motion(SimpleNamespace(frames='52-61', clip='07_01', motion='walk', height=1.75, seed=0))
     camera = studio_rig((960, 540), cameras=[5])[0]
-    rgb, labels, _ = finished(camera, pose_at(walk, 3), scene.Appearance(shirt=scene.SHIRTS['red']))
+    rgb, labels, _ = finished(camera, pose_at(walk, 3), scene.Appearance(shirt=palette.SHIRTS['red']))
     assert (red(rgb) & (labels > 0)).sum() > 200
 
 

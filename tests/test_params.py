@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 import rclpy
 import yaml
-from conftest import assert_one_line_error, run_mvpose
+from common import assert_one_line_error, run_mvpose
 from rcl_interfaces.msg import ParameterType
 from rcl_interfaces.srv import DescribeParameters, GetParameters
 

@@ -27,7 +27,7 @@ setup(
     version='0.1.0',
     packages=find_packages(exclude=['test']),
     # The studio's motion-capture clips travel with its code (no ament index needed to find them).
-    package_data={f'{PACKAGE}.studio': ['cmu/*']},
+    package_data={f'{PACKAGE}.studio': ['cmu/*', 'motions/*']},
     data_files=[
         ('share/ament_index/resource_index/packages', [f'resource/{PACKAGE}']),
         (f'share/{PACKAGE}', ['package.xml']),

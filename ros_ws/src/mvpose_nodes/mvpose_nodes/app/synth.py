@@ -184,7 +184,7 @@ def main(argv=None, prog='synth'):
         bad = [k for k in args.cameras if not 1 <= k <= 8]
         if bad or len(set(args.cameras)) != len(args.cameras):
             raise UserError(f'--cameras takes distinct i3DPost camera numbers 1..8 (got {args.cameras})')
-        from mvpose_nodes.studio.scene import RED_SHIRTS
+        from mvpose_nodes.studio.palette import RED_SHIRTS
         if args.markers and args.shirt in RED_SHIRTS:
             raise UserError(f'--shirt {args.shirt} with --markers: the markers are red, choose another shirt')
         synthesize(args)
@@ -193,7 +193,7 @@ def main(argv=None, prog='synth'):
 
 def synthesize(args):
     global _SETTINGS
-    from mvpose_nodes.studio import scene
+    from mvpose_nodes.studio import palette, scene
     from mvpose_nodes.ros.camera_bag import CameraBagWriter
     from mvpose_nodes.app.progress import Progress
 
@@ -212,8 +212,8 @@ def synthesize(args):
           f'-> {args.output}', file=sys.stderr, flush=True)
     _SETTINGS = SynthSettings(
         views=[scene.prepare_camera(camera, texture_seed=camera.number) for camera in selected],
-        appearance=scene.Appearance(skin=scene.SKIN_TONES[args.skin_tone],
-                                     shirt=scene.SHIRTS[args.shirt or ('green' if args.markers else 'red')],
+        appearance=scene.Appearance(skin=palette.SKIN_TONES[args.skin_tone],
+                                     shirt=palette.SHIRTS[args.shirt or ('green' if args.markers else 'red')],
                                      long_sleeves=args.long_sleeves, girth=args.girth, markers=args.markers),
         realism=scene.Realism(args.exposure_variation, args.white_balance_variation, args.noise, args.blur),
         seed=args.seed, soft_shading=not args.no_soft_shading, shadow=not args.no_shadow,

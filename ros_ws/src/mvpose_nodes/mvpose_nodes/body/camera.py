@@ -1,4 +1,4 @@
-"""Calibrated pinhole cameras with plumb_bob distortion, and the i3DPost-like studio rig.
+"""Calibrated pinhole cameras with plumb_bob distortion, the i3DPost-like studio rig and rings like it.
 
 Conventions: world frame in metres, z up, floor at z = 0. X_cam = R · X_world + t; camera
 (optical) frame x right, y down, z forward. Pixels: x right (column), y down (row), origin
@@ -118,12 +118,48 @@ def intrinsics(focal, width, height):
 def studio_rig(resolution=RIG_RESOLUTION, cameras=range(1, RIG_CAMERAS + 1)):
     """The i3DPost-like ring: camera K at angle (K−1)·45° around the centre, all aimed at RIG_TARGET.
 
-    The focal length scales with the image width, so every resolution sees the same view."""
-    width, height = resolution
-    K = intrinsics(RIG_FOCAL * width / RIG_RESOLUTION[0], width, height)
+    The focal length scales with the image width, so every resolution sees the same view. (ring_rig
+    with its defaults; the demo's cameras, so it must not change.)"""
+    return ring_rig(resolution, cameras=cameras)
+
+
+def ring_rig(resolution=RIG_RESOLUTION, diameter=2 * RIG_RADIUS, height=RIG_HEIGHT, aim=RIG_TARGET,
+             focal_scale=1.0, principal_offsets=(0.0, 0.0), cameras=range(1, RIG_CAMERAS + 1)):
+    """A studio_rig-like ring of RIG_CAMERAS cameras, camera K at angle (K−1)·45° around the world's
+    origin, each at `height` looking at its `aim` point with the image x axis level.
+
+    resolution: (width, height) [px].
+    diameter: [m] of the ring of camera centres.
+    height: [m] camera height above the floor, one for all or one per camera (8,).
+    aim: [m] the world point each camera's optical axis passes through, (3,) for all or (8, 3).
+    focal_scale: the focal length as a multiple of RIG_FOCAL (which is for a 1920 px wide image and is
+        scaled with the width, as in studio_rig), one for all or one per camera (8,).
+    principal_offsets: [px of this resolution] (dx, dy) of the principal point from the image centre,
+        (2,) for all or (8, 2).
+    cameras: the camera numbers 1..8 to make, in this order.
+    Per-camera values are indexed by camera number − 1. With the defaults this is studio_rig, exactly."""
+    width, image_height = resolution
+    heights = _per_camera(height, ())
+    aims = _per_camera(aim, (3,))
+    scales = _per_camera(focal_scale, ())
+    offsets = _per_camera(principal_offsets, (2,))
+    radius = diameter / 2
     rig = []
     for number in cameras:
+        if not 1 <= number <= RIG_CAMERAS:
+            raise ValueError(f'camera number {number} is not in 1..{RIG_CAMERAS}')
+        index = number - 1
+        K = intrinsics(RIG_FOCAL * scales[index] * width / RIG_RESOLUTION[0], width, image_height)
+        K[:2, 2] += offsets[index]
         angle = 2 * math.pi * (number - 1) / RIG_CAMERAS
-        position = (RIG_RADIUS * math.cos(angle), RIG_RADIUS * math.sin(angle), RIG_HEIGHT)
-        rig.append(look_at(number, position, RIG_TARGET, K, width, height))
+        position = (radius * math.cos(angle), radius * math.sin(angle), heights[index])
+        rig.append(look_at(number, position, aims[index], K, width, image_height))
     return rig
+
+
+def _per_camera(value, shape):
+    """(RIG_CAMERAS,) + shape float64: `value` of that shape repeated for every camera, or given per camera."""
+    value = np.asarray(value, dtype=float)
+    if value.shape not in (shape, (RIG_CAMERAS,) + shape):
+        raise ValueError(f'expected shape {shape} or {(RIG_CAMERAS,) + shape}, got {value.shape}')
+    return np.broadcast_to(value, (RIG_CAMERAS,) + shape)

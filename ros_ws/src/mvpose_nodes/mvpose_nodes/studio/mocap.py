@@ -1,9 +1,10 @@
-"""Motion-capture ground truth: BVH files, and CMU walking clips retargeted to the 15-joint body model.
+"""Motion-capture ground truth: BVH files, and CMU clips retargeted to the 15-joint body model.
 
 Sources: the BVH format (Biovision; hierarchy of ROOT/JOINT/End Site with OFFSET and CHANNELS, then
 MOTION rows), and the CMU Graphics Lab Motion Capture Database in B. Hahne's MotionBuilder-friendly
 BVH conversion (shipped in studio/cmu with its README-cmu.txt: frame 1 of every file is an added T-pose facing
-+Z, Y up, subject's left at +X, 120 fps).
++Z, Y up, subject's left at +X, 120 fps) and in his 3dsMax-friendly one (studio/motions/cmu_131_01.bvh, see
+README-motions.md: the same skeleton and axes under other joint names, and no added T-pose).
 
 Project world: metres, z up, floor at z = 0. NumPy only (no rclpy), so tests and tools can use it
 without a ROS graph.
@@ -40,6 +41,16 @@ BODY_JOINT_SOURCES = {  # body-model joint → weights of BVH points whose weigh
 }
 TOE_TIPS = ('LeftToeBase_end', 'RightToeBase_end')
 HAND_TIPS = ('LeftHandIndex1_end', 'RightHandIndex1_end')
+# The 3dsMax-friendly release names the points that retargeting reads otherwise (MotionBuilder name → its
+# name). Its lowerneck and Neck are MotionBuilder's Neck (top of the thorax) and Neck1 (upper neck).
+THREE_DS_MAX_NAMES = {
+    **{f'{side}{motion_builder}': f'{side}{max_name}' for side in ('Left', 'Right') for motion_builder, max_name in (
+        ('UpLeg', 'Hip'), ('Leg', 'Knee'), ('Foot', 'Ankle'), ('ToeBase', 'Toe'), ('ToeBase_end', 'Toe_end'),
+        ('Arm', 'Shoulder'), ('ForeArm', 'Elbow'), ('Hand', 'Wrist'))},
+    'LeftHandIndex1_end': 'LFingers_end', 'RightHandIndex1_end': 'RFingers_end',
+    'Neck': 'lowerneck', 'Neck1': 'Neck',
+}
+TPOSE_ARM_SLOPE = np.sin(np.radians(20.0))  # frame 1 is a T-pose when both upper arms are within 20° of level
 CHANNEL_NAMES = ('Xposition', 'Yposition', 'Zposition', 'Xrotation', 'Yrotation', 'Zrotation')
 
 
@@ -97,7 +108,8 @@ class Bvh:
     def index(self, name):
         """Index of the joint or End Site `name`; MotionFileError naming the file when there is none."""
         if name not in self.names:
-            raise MotionFileError(f'{self.path}: no joint {name} (expected a CMU MotionBuilder-style skeleton)')
+            raise MotionFileError(f'{self.path}: no joint {name} (expected a CMU MotionBuilder- or '
+                                  f'3dsMax-friendly skeleton)')
         return self.names.index(name)
 
     def global_transforms(self, frames=None):
@@ -272,31 +284,93 @@ class BodyMotion:
                                    hand_tips=self.hand_tips @ turn.T + shift, head_forward=self.head_forward @ turn.T)
 
 
+def is_three_ds_max(bvh):
+    """Whether the BVH names its joints as the 3dsMax-friendly CMU release does (LeftHip, …) rather than
+    as the MotionBuilder-friendly one (LeftUpLeg, …)."""
+    return 'LeftUpLeg' not in bvh.names and 'LeftHip' in bvh.names
+
+
+def point_index(bvh, name):
+    """Index of the point that MotionBuilder's skeleton calls `name`, in either naming (THREE_DS_MAX_NAMES);
+    MotionFileError naming the file when there is none."""
+    return bvh.index(THREE_DS_MAX_NAMES.get(name, name) if is_three_ds_max(bvh) else name)
+
+
 def point_weights(bvh, sources):
     """(K, J) weights such that weights @ bvh points gives the K points named by `sources`
-    (a sequence of {BVH point name: weight})."""
+    (a sequence of {BVH point name: weight}, in MotionBuilder's names; see point_index)."""
     weights = np.zeros((len(sources), len(bvh.names)))
     for row, source in enumerate(sources):
         for name, weight in source.items():
-            weights[row, bvh.index(name)] += weight
+            weights[row, point_index(bvh, name)] += weight
     return weights
+
+
+def neck_fraction(bvh):
+    """How far the neck (base of the neck, between the shoulders) lies from MotionBuilder's Neck (top of
+    the thorax) towards Neck1 (upper neck). MotionBuilder-friendly clips: NECK_FRACTION, as tuned on
+    subject 7. Otherwise the level of the shoulders' midpoint on that segment in the standing reference
+    pose (reference_pose), since the clavicles' rise differs from subject to subject (131: 0.86, its
+    lowerneck is 8 cm below the shoulder joints)."""
+    if not is_three_ds_max(bvh):
+        return NECK_FRACTION
+    pose = reference_pose(bvh)
+    thorax, upper = pose[point_index(bvh, 'Neck')], pose[point_index(bvh, 'Neck1')]
+    shoulders = (pose[point_index(bvh, 'LeftArm')] + pose[point_index(bvh, 'RightArm')]) / 2
+    segment = upper - thorax
+    return float(np.dot(shoulders - thorax, segment) / np.dot(segment, segment))
 
 
 def body_points(bvh, positions):
     """Joints (F, 15, 3), toes (F, 2, 3), hand tips (F, 2, 3) from BVH point positions (F, J, 3), in the
     same units and axes."""
-    sources = [BODY_JOINT_SOURCES[name] for name in JOINT_NAMES] + [{name: 1.0} for name in TOE_TIPS + HAND_TIPS]
+    joint_sources = BODY_JOINT_SOURCES
+    if is_three_ds_max(bvh):
+        fraction = neck_fraction(bvh)
+        joint_sources = {**BODY_JOINT_SOURCES, 'neck': {'Neck': 1.0 - fraction, 'Neck1': fraction}}
+    sources = [joint_sources[name] for name in JOINT_NAMES] + [{name: 1.0} for name in TOE_TIPS + HAND_TIPS]
     points = np.einsum('kj,fjc->fkc', point_weights(bvh, sources), positions)
     return points[:, :len(JOINT_NAMES)], points[:, -4:-2], points[:, -2:]
 
 
+def has_tpose(bvh):
+    """Whether frame 1 is a T-pose, as the MotionBuilder-friendly files add one: both upper arms level
+    (within 20°). The 3dsMax-friendly release starts with the motion itself."""
+    pose = bvh.global_positions(0)[0]
+    for side in ('Left', 'Right'):
+        arm = pose[point_index(bvh, f'{side}ForeArm')] - pose[point_index(bvh, f'{side}Arm')]
+        if abs(arm[1]) > TPOSE_ARM_SLOPE * np.linalg.norm(arm):
+            return False
+    return True
+
+
+def reference_pose(bvh):
+    """(J, 3) positions [BVH units, BVH axes] of the skeleton standing upright, which sizes it: frame 1
+    when that is a T-pose (has_tpose); otherwise the rest pose that the OFFSETs define (every channel
+    zero), with each leg turned about its hip to hang straight down, for a CMU skeleton's rest pose
+    spreads the legs by 20° (a T-pose's legs are straight)."""
+    if has_tpose(bvh):
+        return bvh.global_positions(0)[0]
+    pose = dataclasses.replace(bvh, motion=np.zeros((1, bvh.motion.shape[1]))).global_positions(0)[0]
+    for side in ('Left', 'Right'):
+        hip, knee = point_index(bvh, f'{side}UpLeg'), point_index(bvh, f'{side}Leg')
+        leg = np.zeros(len(bvh.names), dtype=bool)
+        leg[hip] = True
+        for point in range(hip + 1, len(bvh.names)):  # a parent comes before its children
+            leg[point] = leg[bvh.parents[point]]
+        turn = matrix_from_quaternion(rotation_between(pose[knee] - pose[hip], [0.0, -1.0, 0.0]))
+        pose[leg] = pose[hip] + (pose[leg] - pose[hip]) @ turn.T
+    return pose
+
+
 def world_scale(bvh, height):
-    """Metres per BVH unit such that the T-pose (row 0) stands `height` [m] tall: Head End Site above
-    the lower toe End Site."""
-    tpose = bvh.global_positions(0)[0]
-    standing = tpose[bvh.index('Head_end'), 1] - min(tpose[bvh.index(name), 1] for name in TOE_TIPS)
+    """Metres per BVH unit such that the standing reference pose (reference_pose: the T-pose, row 0, or
+    the OFFSETs' rest pose) stands `height` [m] tall: Head End Site above the lower toe End Site."""
+    tpose = reference_pose(bvh)
+    standing = tpose[point_index(bvh, 'Head_end'), 1] - min(tpose[point_index(bvh, name), 1] for name in TOE_TIPS)
     if standing <= 0:
-        raise MotionFileError(f'{bvh.path}: frame 1 is not a standing T-pose (head not above the toes)')
+        raise MotionFileError(f'{bvh.path}: its standing pose (the T-pose of frame 1, or the rest pose of the '
+                              f'OFFSETs) does not stand (head not above the toes)')
     return height / standing
 
 
@@ -324,25 +398,31 @@ def floor_levelling(ankles):
 
 
 def retarget(bvh, height=1.75, frame_rate=FRAME_RATE, first_frame=0):
-    """The motion of a CMU MotionBuilder-style BVH (frames 2..end, after the T-pose) as a BodyMotion.
+    """The motion of a CMU BVH as a BodyMotion: frames 2..end of a MotionBuilder-friendly file (after its
+    T-pose), every frame of a 3dsMax-friendly one (has_tpose).
 
-    Axes BVH (x, y, z) → project (x, −z, y), scaled so that the T-pose stands `height` [m] tall (see
-    world_scale). Joints: hips = Left/RightUpLeg, pelvis = their midpoint, knees = Left/RightLeg, ankles =
-    Left/RightFoot, shoulders = Left/RightArm, elbows = Left/RightForeArm, wrists = Left/RightHand, head =
-    Head's End Site (vertex); neck = Neck + 0.6 · (Neck1 − Neck), a retargeting choice: CMU's Neck sits at
-    the thorax below the shoulder line, and 0.6 of the way up to Neck1 is the base of the neck.
-    head_forward: BVH +Z (the T-pose's facing) through the Head's global rotation, in project axes.
+    Axes BVH (x, y, z) → project (x, −z, y), scaled so that the standing reference pose (the T-pose, or
+    the OFFSETs' rest pose with straight legs) is `height` [m] tall (see world_scale). Joints, in
+    MotionBuilder's names (3dsMax's in THREE_DS_MAX_NAMES): hips = Left/RightUpLeg, pelvis = their
+    midpoint, knees = Left/RightLeg, ankles = Left/RightFoot, shoulders = Left/RightArm, elbows =
+    Left/RightForeArm, wrists = Left/RightHand, head = Head's End Site (vertex); neck = Neck + 0.6 ·
+    (Neck1 − Neck), a retargeting choice: CMU's Neck sits at the thorax below the shoulder line, and 0.6
+    of the way up to Neck1 is the base of the neck (3dsMax-friendly skeletons: the shoulders' level,
+    neck_fraction). head_forward: BVH +Z (the T-pose's facing) through the Head's global rotation, in
+    project axes.
     Every point trajectory is resampled from the BVH rate to frame_rate [Hz] by linear interpolation
     (see resample; head_forward renormalised after). The floor: levelled (floor_levelling), then z shifted
     so that the lowest ankle over the clip is at 0.075 · height / 1.75 m, the ankle joint centre's height
     above the sole.
     """
-    if bvh.frame_count < 3:
-        raise MotionFileError(f'{bvh.path}: {bvh.frame_count} frames: need the T-pose and at least two of motion')
+    first = 1 if bvh.frame_count and has_tpose(bvh) else 0
+    if bvh.frame_count - first < 2:
+        raise MotionFileError(f'{bvh.path}: {bvh.frame_count} frames: need at least two of motion'
+                              + (' after the T-pose' if first else ''))
     scale = world_scale(bvh, height)
-    rotations, positions = bvh.global_transforms(np.arange(1, bvh.frame_count))
+    rotations, positions = bvh.global_transforms(np.arange(first, bvh.frame_count))
     joints, toes, hand_tips = (scale * points @ BVH_TO_WORLD.T for points in body_points(bvh, positions))
-    head_forward = rotations[:, bvh.index('Head'), :, 2] @ BVH_TO_WORLD.T  # column 2 = image of BVH +Z
+    head_forward = rotations[:, point_index(bvh, 'Head'), :, 2] @ BVH_TO_WORLD.T  # column 2 = image of BVH +Z
     tracks = np.concatenate([joints, toes, hand_tips, head_forward[:, None]], axis=1)
     tracks = resample(tracks, bvh.frame_time, frame_rate)
     ankles = [JOINT_NAMES.index('left_ankle'), JOINT_NAMES.index('right_ankle')]
@@ -357,11 +437,11 @@ def retarget(bvh, height=1.75, frame_rate=FRAME_RATE, first_frame=0):
 
 def standing_motion(bvh, frames, height=1.75, frame_rate=FRAME_RATE, first_frame=0, seed=0):
     """A person standing still for `frames` frames, for initialisation tests, built from the subject's own
-    bone lengths (T-pose, scaled as in retarget; left and right averaged): upright at the origin facing
+    bone lengths (T-pose or reference_pose, scaled as in retarget; left and right averaged): upright at the origin facing
     +x (left at +y), feet under the hips, legs straight, arms hanging with 10° of abduction, head upright,
     ankles 0.075 · height / 1.75 m above the floor. A seeded smooth sway leans the body about the ankles:
     up to SWAY_AMPLITUDE at the head, so that frames are not identical."""
-    tpose = world_scale(bvh, height) * bvh.global_positions(0)[0] @ BVH_TO_WORLD.T
+    tpose = world_scale(bvh, height) * reference_pose(bvh) @ BVH_TO_WORLD.T
     joints, (toes,), (hand_tips,) = body_points(bvh, tpose[None])
     joints = joints[0]
     at = {name: joints[JOINT_NAMES.index(name)] for name in JOINT_NAMES}

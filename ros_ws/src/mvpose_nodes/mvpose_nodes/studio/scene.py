@@ -15,6 +15,7 @@ import numpy as np
 
 from mvpose_nodes.body.model import (JOINT_INDEX, JOINT_NAMES, LABEL_HEAD, LABEL_LEFT_ARM, LABEL_LEFT_HAND, LABEL_LEFT_LEG, LABEL_RIGHT_ARM, LABEL_RIGHT_HAND, LABEL_RIGHT_LEG, LABEL_TORSO)
 from mvpose_nodes.body.geometry import normalize
+from mvpose_nodes.studio.palette import HAIR_COLOURS, HAIR_LENGTHS, SHIRTS, SKIN_TONES, TROUSER_COLOURS
 
 SKIN_BIT = 0x80  # set in a ground-truth label mask where the surface is skin
 
@@ -26,9 +27,9 @@ MARKER_PROTRUSION = 0.5   # marker centre this many radii outside the body surfa
 MARKER_MIN_VISIBLE = 0.25  # a marker is visible in a camera when at least this fraction of its disc is seen
 
 STUDIO_RADIUS = 5.0       # [m] cylindrical wall around the capture area
-STUDIO_HEIGHT = 3.2       # [m] wall height; above it the dark ceiling
+STUDIO_HEIGHT = 3.2       # [m] wall height; above it the ceiling
 CHROMA_BLUE = np.array([0.06, 0.16, 0.55], np.float32)  # linear RGB of the walls and floor
-CEILING = np.array([0.05, 0.05, 0.06], np.float32)
+CEILING = (CHROMA_BLUE * 0.6).astype(np.float32)  # blue, dimmer: studio/cases.py's lower, wider cameras see it
 KEY_LIGHT = normalize(np.array([0.35, 0.25, 1.0]))    # mostly from above, as studio lights hang
 AMBIENT = 0.35
 WRAP = 0.5                # wrap-around diffuse: soft shading without black terminators
@@ -38,23 +39,21 @@ SHADOW_BLUR = 0.05        # [m] penumbra (sigma)
 SHADOW_STRENGTH = 0.55
 
 
-SKIN_TONES = {'light': (0.75, 0.52, 0.42), 'medium': (0.62, 0.40, 0.30), 'dark': (0.28, 0.16, 0.10)}
-SHIRTS = {'red': (0.55, 0.12, 0.10), 'green': (0.12, 0.35, 0.12), 'grey': (0.30, 0.30, 0.30),
-          'white': (0.80, 0.80, 0.78), 'yellow': (0.70, 0.55, 0.08)}
-RED_SHIRTS = ('red',)  # shirts a red-marker detector would take for markers
-
-
 @dataclass(frozen=True)
 class Appearance:
     """How the person looks: linear-RGB albedos, clothing and size. Radii scale with `girth`."""
     skin: tuple = SKIN_TONES['medium']
-    hair: tuple = (0.06, 0.04, 0.03)
+    hair: tuple = HAIR_COLOURS['dark']
     shirt: tuple = SHIRTS['red']
-    trousers: tuple = (0.08, 0.08, 0.09)
+    trousers: tuple = TROUSER_COLOURS['dark']
     shoes: tuple = (0.035, 0.035, 0.04)  # black: brown leather is skin-coloured to any colour detector
     long_sleeves: bool = False
     girth: float = 1.0
     markers: bool = False  # red marker spheres on the 15 joints (paper 001's marker suit), see marker_centres
+    hair_length: str = 'short'  # one of HAIR_LENGTHS
+
+    def __post_init__(self):
+        HAIR_LENGTHS.index(self.hair_length)  # ValueError unless one of them
 
     def palette(self):
         """(8, 3) float32: row m = albedo of material m (row 0 unused, HEAD resolved per pixel)."""
@@ -129,8 +128,12 @@ def _body_solids(pose, appearance):
                 LABEL_HEAD, SKIN, 'neck'),
     ]
     head_up = normalize(p[JOINT_INDEX['head']] - p[JOINT_INDEX['neck']])
-    solids.append(Ellipsoid(p[JOINT_INDEX['head']] - 0.115 * head_up, _frame(head_up, pose.head_forward),
-                            np.array([0.115, 0.10, 0.08]), LABEL_HEAD, HEAD, 'head'))
+    head = Ellipsoid(p[JOINT_INDEX['head']] - 0.115 * head_up, _frame(head_up, pose.head_forward),
+                     np.array([0.115, 0.10, 0.08]), LABEL_HEAD, HEAD, 'head')
+    solids.append(head)
+    if appearance.hair_length == 'long':  # a shell behind the head and neck to 0.36 m below the crown
+        solids.append(Ellipsoid(head.center - 0.07 * head_up - 0.035 * head.axes[:, 1], head.axes,
+                                np.array([0.175, 0.085, 0.092]), LABEL_HEAD, HAIR, 'hair'))
     for side, arm_label, hand_label, leg_label, toe, tip in (
             ('left', LABEL_LEFT_ARM, LABEL_LEFT_HAND, LABEL_LEFT_LEG, pose.toes[0], pose.hand_tips[0]),
             ('right', LABEL_RIGHT_ARM, LABEL_RIGHT_HAND, LABEL_RIGHT_LEG, pose.toes[1], pose.hand_tips[1])):
@@ -400,7 +403,7 @@ def render(view, pose, appearance, shadow=None, shadow_center=None, soft_shading
         first_marker = len(solids) - len(JOINT_NAMES)
         marker_ids = np.where(materials == MARKER, which - first_marker, -1).astype(np.int8)
     person = materials > 0
-    _resolve_hair(materials, normals, pose, person)
+    _resolve_hair(materials, normals, pose, person, appearance.hair_length)
     albedo = appearance.palette()[materials]
     light = np.clip((normals @ KEY_LIGHT.astype(np.float32) + WRAP) / (1 + WRAP), 0, 1) if soft_shading \
         else np.ones((height, width), np.float32)
@@ -419,15 +422,16 @@ def render(view, pose, appearance, shadow=None, shadow_center=None, soft_shading
     return Rendering(scene, labels, marker_ids)
 
 
-def _resolve_hair(materials, normals, pose, person):
-    """HEAD pixels become hair on the crown and the back of the head, skin on the face."""
+def _resolve_hair(materials, normals, pose, person, hair_length='short'):
+    """HEAD pixels become hair on the crown and the back of the head, skin on the face (see HAIR_LENGTHS)."""
     head = materials == HEAD
     if not head.any():
         return
     head_up = normalize(pose.joints[JOINT_INDEX['head']] - pose.joints[JOINT_INDEX['neck']])
     forward = normalize(pose.head_forward - np.dot(pose.head_forward, head_up) * head_up)
     n = normals[head]
-    hair = (n @ head_up > 0.45) | (n @ forward < -0.1)
+    crown, back, nape = (0.55, -0.35, -0.2) if hair_length == 'cropped' else (0.45, -0.1, -2.0)
+    hair = (n @ head_up > crown) | ((n @ forward < back) & (n @ head_up > nape))
     materials[head] = np.where(hair, HAIR, SKIN)
 
 
@@ -447,17 +451,19 @@ def _screen_box(camera, center, radius):
 
 @dataclass(frozen=True)
 class Realism:
-    """The camera effects applied to a rendering (each 0 / False to switch it off)."""
+    """The camera effects applied to a rendering (each 0, or 1 for exposure and white_balance, for none)."""
     exposure_variation: float = 0.08    # relative spread of per-camera exposure gain
     white_balance_variation: float = 0.04  # relative spread of per-channel gains
     noise: float = 2.0                  # [DN] sensor read noise sigma, plus shot noise
     blur: float = 0.6                   # [px] optics (Gaussian sigma); also softens the ray-cast edges
+    exposure: float = 1.0               # gain of the whole rig (under or over exposure), times each camera's
+    white_balance: tuple = (1.0, 1.0, 1.0)  # (r, g, b) gains of the whole rig (a colour cast), times each camera's
 
     def camera_response(self, camera_number, seed):
         """(gain, white balance (3,)) of one camera: fixed per camera and seed, as in a real rig."""
         rng = np.random.default_rng([seed, camera_number, 1])
-        gain = 1.0 + self.exposure_variation * rng.uniform(-1, 1)
-        balance = 1.0 + self.white_balance_variation * rng.uniform(-1, 1, 3)
+        gain = self.exposure * (1.0 + self.exposure_variation * rng.uniform(-1, 1))
+        balance = np.multiply(self.white_balance, 1.0 + self.white_balance_variation * rng.uniform(-1, 1, 3))
         return gain, balance.astype(np.float32)
 
     def finish(self, rendering, view, camera_number, seed, frame_number):
