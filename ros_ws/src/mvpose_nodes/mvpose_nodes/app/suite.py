@@ -1,0 +1,270 @@
+"""`eval suite`: the fitter's accuracy over randomised studio cases, not one walk.
+
+Each case is drawn at random (seeded: studio/cases.py) over motions (studio/catalogue.py: CMU and AMP
+motion capture and scripted actions, started anywhere), rigs, bodies, clothes and imaging. It is
+rendered with the studio frame by frame, every camera at its own jittered instant; each image goes
+through JPEG at the case's quality, the camera_features pipeline and its messages, and each frame set
+through ros/frame_set_fitting.py, the code the skeleton_fitter node runs. Nothing crosses DDS, so a
+case's figures do not depend on the machine's load.
+
+Printed: a row per case (motion, rig, body, mean / median / worst-frame error, frames with a left/right
+swap after the first SWAP_GRACE_FRAMES, frame sets without a skeleton, median fit time), and per motion
+set (tuning, held-out, stress) the mean, median, 90th percentile and worst of the cases' mean errors,
+plus each joint's mean. Written to --output: the worst case's per-frame error plot and an overlay of
+its worst frame over the cameras it used.
+"""
+import math
+import sys
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from mvpose_nodes.tools.cli import ArgumentParser, UserError, exit_on_user_error
+
+SWAP_GRACE_FRAMES = 10   # the first frames of a case may still be sorting left from right (issue 13's target)
+MOTION_SETS = ('tuning', 'held-out', 'stress')
+
+
+def build_parser(prog):
+    parser = ArgumentParser(prog=prog, description=__doc__.split('\n\n')[0])
+    parser.add_argument('--cases', type=int, default=12, metavar='N', help='cases to draw (default 12)')
+    parser.add_argument('--seed', type=int, default=0, help='seed of the draw (default 0)')
+    parser.add_argument('--cameras', type=int, nargs='+', metavar='K',
+                        help='use these cameras in every case (default: any 3, or all 8, drawn per case)')
+    parser.add_argument('--motions', default='all',
+                        help="'all', 'tuning', 'held-out', 'stress', or motion names separated by commas")
+    parser.add_argument('--frames', type=int, default=50, help='frame sets per case (default 50, 2 s)')
+    parser.add_argument('--resolution', default='1920x1080', help='WIDTHxHEIGHT (default 1920x1080)')
+    parser.add_argument('-j', '--jobs', type=int, default=2, help='cases rendered and fitted at once (default 2)')
+    parser.add_argument('-o', '--output', type=Path, default=Path('output/suite'),
+                        help='folder for the worst case\'s pictures (default output/suite)')
+    return parser
+
+
+def motion_set(name):
+    from mvpose_nodes.studio.catalogue import HELD_OUT_MOTIONS, STRESS_MOTIONS
+    return 'held-out' if name in HELD_OUT_MOTIONS else 'stress' if name in STRESS_MOTIONS else 'tuning'
+
+
+def chosen_motions(text):
+    """The motion names --motions selects, in catalogue order; UserError naming the known ones."""
+    from mvpose_nodes.studio.catalogue import MOTIONS
+    if text == 'all':
+        return tuple(MOTIONS)
+    if text in MOTION_SETS:
+        return tuple(name for name in MOTIONS if motion_set(name) == text)
+    names = tuple(n.strip() for n in text.split(',') if n.strip())
+    unknown = [n for n in names if n not in MOTIONS]
+    if unknown or not names:
+        raise UserError(f"--motions: unknown {', '.join(unknown) or 'empty list'} (known: all, "
+                        f"{', '.join(MOTION_SETS)}, {', '.join(MOTIONS)})")
+    return names
+
+
+def draw_cases(args, resolution):
+    """The cases of a run: motions cycled through in a seeded order (every chosen motion once before any
+    twice), everything else drawn per case by studio.cases.draw_case."""
+    from mvpose_nodes.studio.cases import draw_case
+    motions = chosen_motions(args.motions)
+    rng = np.random.default_rng(args.seed)
+    order = [motions[i] for i in rng.permutation(len(motions))]
+    return [draw_case(np.random.default_rng([args.seed, index]), index, (order[index % len(order)],),
+                      args.frames, resolution, cameras=args.cameras) for index in range(args.cases)]
+
+
+def main(argv=None, prog='eval suite'):
+    args = build_parser(prog).parse_args(sys.argv[1:] if argv is None else argv)
+    with exit_on_user_error(prog):
+        from mvpose_nodes.app.synth import parse_resolution
+        from mvpose_nodes.app.progress import Progress
+        if args.cases < 1 or args.frames < 2 or args.jobs < 1:
+            raise UserError('--cases and --jobs take at least 1, --frames at least 2')
+        if args.cameras is not None and (len(set(args.cameras)) != len(args.cameras) or len(args.cameras) < 2
+                                         or not all(1 <= k <= 8 for k in args.cameras)):
+            raise UserError(f'--cameras takes 2 or more distinct camera numbers 1..8 (got {args.cameras})')
+        cases = draw_cases(args, parse_resolution(args.resolution))
+        print(f'[suite] {len(cases)} cases × {args.frames} frame sets, seed {args.seed}, {args.jobs} at once',
+              file=sys.stderr, flush=True)
+        progress = Progress(len(cases), 'suite', unit='cases')
+        results = []
+        with ProcessPoolExecutor(max_workers=args.jobs) as pool:
+            for result in pool.map(run_case, cases):
+                results.append(result)
+                progress.update()
+        progress.close()
+        report(results)
+        pictures(max(results, key=lambda r: r.mean_error), args.output)
+    return 0
+
+
+@dataclass
+class CaseResult:
+    case: object
+    errors: np.ndarray            # (F, 15) [mm] per joint; NaN rows where no skeleton came
+    statuses: list                # Skeleton.status per frame set, None where no skeleton came
+    fit_seconds: list
+    joints: np.ndarray            # (F, 15, 3) [m] fitted, NaN where none
+    truth: np.ndarray             # (F, 15, 3) [m]
+    swapped: np.ndarray = field(default=None)   # (F,) bool: a left/right pair nearer the other side's truth
+
+    @property
+    def mean_error(self):
+        return float(np.nanmean(self.errors)) if np.isfinite(self.errors).any() else math.inf
+
+    @property
+    def per_frame(self):
+        return np.nanmean(self.errors, axis=1) if np.isfinite(self.errors).any() else self.errors[:, 0]
+
+
+def case_motion(case):
+    """The case's BodyMotion window (frames, at 25 fps) placed at its centre and heading."""
+    from mvpose_nodes.studio.catalogue import load_motion
+    motion = load_motion(case.motion, height=case.height)
+    window = motion.select(motion.first_frame + case.start, motion.first_frame + case.start + case.frames - 1)
+    return window.placed(center=case.centre, heading=case.heading)
+
+
+def pose_at(motion, position):
+    """scene.BodyPose at a fractional frame index `position` (linear between frames, clamped)."""
+    from mvpose_nodes.studio import scene
+    position = float(np.clip(position, 0, len(motion.joints) - 1))
+    low = int(math.floor(position))
+    high, weight = min(low + 1, len(motion.joints) - 1), position - low
+
+    def at(values):
+        return (1 - weight) * values[low] + weight * values[high]
+    forward = at(motion.head_forward)
+    return scene.BodyPose(at(motion.joints), at(motion.toes), at(motion.hand_tips), forward / np.linalg.norm(forward))
+
+
+def render_camera(case, view, motion, index):
+    """One camera's 8-bit RGB image of frame `index`, at its jittered instant, through JPEG."""
+    import cv2
+    from mvpose_nodes.studio import scene
+    from mvpose_nodes.studio.i3dpost import FRAME_RATE
+    number = view.camera.number
+    pose = pose_at(motion, index + case.jitter[case.cameras.index(number)] * FRAME_RATE)
+    shadow = centre = None
+    if case.shadows:
+        centre = pose.joints[0, :2]
+        shadow = scene.shadow_map(scene.body_primitives(pose, case.appearance), centre)
+    rendering = scene.render(view, pose, case.appearance, shadow, centre)
+    rgb, _ = case.realism.finish(rendering, view, number, case.seed, index)
+    ok, data = cv2.imencode('.jpg', cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR), [cv2.IMWRITE_JPEG_QUALITY, case.jpeg_quality])
+    return cv2.cvtColor(cv2.imdecode(data, cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB)
+
+
+def run_case(case):
+    """Render, extract and fit every frame set of a case; its CaseResult."""
+    from std_msgs.msg import Header
+    from mvpose_nodes.app.reports.accuracy import joint_errors_mm
+    from mvpose_nodes.fitting.settings import FitterSettings
+    from mvpose_nodes.ros.camera_bag import frame_stamp_ns
+    from mvpose_nodes.ros.conversions import feature_messages, joints_from_skeleton, optical_frame, set_stamp
+    from mvpose_nodes.ros.frame_set_fitting import FrameSetFitter
+    from mvpose_nodes.ros.params import default_skin_model_path
+    from mvpose_nodes.studio import scene
+    from mvpose_nodes.vision.features import FeatureExtractor, FeatureSettings
+    from mvpose_nodes.vision.skin import SkinModel
+
+    motion = case_motion(case)
+    cameras = {c.number: c for c in case.rig if c.number in case.cameras}
+    views = [scene.prepare_camera(cameras[k], texture_seed=k) for k in case.cameras]
+    skin = SkinModel.load(default_skin_model_path())
+    extractors = {k: FeatureExtractor(FeatureSettings(), skin) for k in case.cameras}
+    fitting = FrameSetFitter(FitterSettings(), case.cameras)
+    count = len(motion.joints)
+    joints = np.full((count, 15, 3), np.nan)
+    statuses, seconds = [None] * count, []
+    for index in range(count):
+        stamp = frame_stamp_ns(index)
+        features = {}
+        for view in views:
+            number = view.camera.number
+            header = set_stamp(Header(), stamp, optical_frame(number))
+            _, ellipses, contour = feature_messages(extractors[number](render_camera(case, view, motion, index)),
+                                                    header)
+            features[number] = cameras[number], ellipses, contour
+        result = fitting.fit(stamp, features)
+        if result.message is not None:
+            joints[index] = joints_from_skeleton(result.message)
+            statuses[index] = result.message.status
+            seconds.append(result.message.fit_time)
+    truth = motion.joints
+    errors = joint_errors_mm(joints, truth)
+    return CaseResult(case, errors, statuses, seconds, joints, truth, swapped_frames(joints, truth))
+
+
+def swapped_frames(fitted, truth):
+    """(F,) bool: frames where a left/right pair (ankles, knees, wrists, elbows) is nearer the other
+    side's truth than its own."""
+    from mvpose_nodes.app.reports.accuracy import SWAPPABLE_JOINTS
+    from mvpose_nodes.body.model import JOINT_INDEX
+    swapped = np.zeros(len(fitted), bool)
+    for name in SWAPPABLE_JOINTS:
+        left, right = JOINT_INDEX[f'left_{name}'], JOINT_INDEX[f'right_{name}']
+        straight = np.linalg.norm(fitted[:, left] - truth[:, left], axis=1) + \
+            np.linalg.norm(fitted[:, right] - truth[:, right], axis=1)
+        crossed = np.linalg.norm(fitted[:, left] - truth[:, right], axis=1) + \
+            np.linalg.norm(fitted[:, right] - truth[:, left], axis=1)
+        swapped |= crossed < straight
+    return swapped
+
+
+def report(results):
+    """The per-case table and the per-set summary on stdout."""
+    from mvpose_nodes.app.reports.accuracy import PAPER_MEAN_MM
+    from mvpose_nodes.body.model import JOINT_NAMES
+    from mvpose_nodes.studio.cases import describe_case
+    print(f'eval suite: {len(results)} cases   errors in mm (the mean joint error of a frame set, Eq. 12)')
+    print(f'  {"#":>2} {"set":<8} {"motion":<24} {"rig":<30} {"body":<40} {"mean":>6} {"median":>6} '
+          f'{"worst":>6} {"swaps":>5} {"none":>4} {"fit ms":>6}')
+    for result in results:
+        described = describe_case(result.case)
+        per_frame = result.per_frame
+        finite = per_frame[np.isfinite(per_frame)]
+        none = sum(status is None for status in result.statuses)
+        swaps = int(result.swapped[SWAP_GRACE_FRAMES:].sum())
+        fit_ms = 1000 * np.median(result.fit_seconds) if result.fit_seconds else math.nan
+        cells = (f'{np.mean(finite):6.1f} {np.median(finite):6.1f} {np.max(finite):6.1f}' if len(finite)
+                 else f'{"–":>6} {"–":>6} {"–":>6}')
+        print(f'  {result.case.index:>2} {motion_set(result.case.motion):<8} {described["motion"][:24]:<24} '
+              f'{described["rig"][:30]:<30} {described["body"][:40]:<40} {cells} {swaps:>5} {none:>4} {fit_ms:>6.0f}')
+    for name in MOTION_SETS:
+        chosen = [r for r in results if motion_set(r.case.motion) == name]
+        if not chosen:
+            continue
+        means = np.array([r.mean_error for r in chosen])
+        worst = chosen[int(np.argmax(means))]
+        print(f'  {name}: {len(chosen)} cases: mean {np.mean(means):.1f}, median {np.median(means):.1f}, '
+              f'90th percentile {np.percentile(means, 90):.1f}, worst {np.max(means):.1f} (case {worst.case.index}, '
+              f'{worst.case.motion}); cases over {PAPER_MEAN_MM} mm: {int(np.sum(means > PAPER_MEAN_MM))}; '
+              f'swapped frames after the first {SWAP_GRACE_FRAMES}: '
+              f'{sum(int(r.swapped[SWAP_GRACE_FRAMES:].sum()) for r in chosen)}; frame sets without a skeleton: '
+              f'{sum(s is None for r in chosen for s in r.statuses)}')
+    joint_means = np.nanmean(np.concatenate([r.errors for r in results]), axis=0)
+    print('  per joint (all cases): ' + ', '.join(f'{n} {m:.0f}' for n, m in zip(JOINT_NAMES, joint_means)))
+
+
+def pictures(worst, output):
+    """The worst case's per-frame error plot and its worst frame's overlay over the cameras it used."""
+    from mvpose_nodes.app.reports.plots import error_plot
+    from mvpose_nodes.app.reports.sheets import contact_sheet
+    from mvpose_nodes.studio import scene
+    case = worst.case
+    per_frame = worst.per_frame
+    plot = error_plot(per_frame, None, Path(output) / f'worst_case_{case.index}_error_per_frame.png',
+                      per_joint=worst.errors, title=f'Worst case {case.index} ({case.motion}): mean joint error per frame')
+    index = int(np.nanargmax(per_frame)) if np.isfinite(per_frame).any() else 0
+    motion = case_motion(case)
+    cameras = {c.number: c for c in case.rig if c.number in case.cameras}
+    images = {k: render_camera(case, scene.prepare_camera(cameras[k], texture_seed=k), motion, index)
+              for k in case.cameras}
+    fitted = worst.joints[index] if np.isfinite(worst.joints[index]).all() else None
+    sheet = contact_sheet(images, cameras, fitted, worst.truth[index],
+                          Path(output) / f'worst_case_{case.index}_frame_{index}.png', columns=min(4, len(images)),
+                          title=f'case {case.index} ({case.motion}) frame {index}: fit (colour), truth (white)')
+    print(f'[suite] worst case {case.index}: {plot}, {sheet}', file=sys.stderr)
+
