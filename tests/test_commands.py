@@ -157,3 +157,31 @@ def test_markers_eval_compares_the_three_methods(tmp_path, synth_bag):
     result = run_mvpose('markers', 'eval', plain, check=False)
     assert result.returncode != 0
     assert f"bag '{plain}' has no ground-truth markers" in result.stderr and len(result.stderr.strip().splitlines()) == 1
+
+
+def test_eval_suite_runs_small_cases_and_prints_every_figure(tmp_path):
+    """Issue 13's small suite for CI: 3 drawn cases at 960×540, 10 frame sets each, fitted as the node
+    fits them; the table has a row per case, a summary per motion set, and the worst case's pictures.
+    The same draw twice gives the same table (the suite is deterministic)."""
+    arguments = ('eval', 'suite', '--cases', 3, '--frames', 10, '--resolution', '960x540', '--seed', 4,
+                 '-o', tmp_path / 'suite')
+    first = run_mvpose(*arguments, timeout=600)
+    rows = [line for line in first.stdout.splitlines() if line[:5].strip().isdigit()]
+    assert len(rows) == 3, first.stdout
+    for row in rows:
+        mean, median, worst = (float(cell) for cell in row.split()[-6:-3])
+        assert 0 < median <= worst and mean <= worst, row
+    assert 'per joint (all cases): pelvis' in first.stdout
+    assert any(line.strip().startswith(('tuning:', 'held-out:', 'stress:')) and '90th percentile' in line
+               for line in first.stdout.splitlines()), first.stdout
+    assert len(list((tmp_path / 'suite').glob('worst_case_*_error_per_frame.png'))) == 1
+    assert len(list((tmp_path / 'suite').glob('worst_case_*_frame_*.png'))) == 1
+    again = run_mvpose(*arguments[:-1], tmp_path / 'again', '--only', 1, timeout=600)
+    repeated = [line for line in again.stdout.splitlines() if line[:5].strip() == '1']
+    assert [line.rsplit(maxsplit=1)[0] for line in repeated] == [rows[1].rsplit(maxsplit=1)[0]]   # all but fit ms
+
+
+def test_eval_suite_bad_arguments_are_one_line_errors():
+    assert_one_line_error(run_mvpose('eval', 'suite', '--motions', 'moonwalk', check=False), 'moonwalk')
+    assert_one_line_error(run_mvpose('eval', 'suite', '--cameras', 3, 3, check=False), '--cameras')
+    assert_one_line_error(run_mvpose('eval', 'suite', '--cases', 2, '--only', 5, check=False), '--only')

@@ -36,6 +36,8 @@ def build_parser(prog):
     parser.add_argument('--motions', default='all',
                         help="'all', 'tuning', 'held-out', 'stress', or motion names separated by commas")
     parser.add_argument('--frames', type=int, default=50, help='frame sets per case (default 50, 2 s)')
+    parser.add_argument('--only', type=int, nargs='+', metavar='INDEX',
+                        help='run only these cases of the draw (as numbered in the table), e.g. to look at one again')
     parser.add_argument('--resolution', default='1920x1080', help='WIDTHxHEIGHT (default 1920x1080)')
     parser.add_argument('-j', '--jobs', type=int, default=2, help='cases rendered and fitted at once (default 2)')
     parser.add_argument('-o', '--output', type=Path, default=Path('output/suite'),
@@ -85,6 +87,10 @@ def main(argv=None, prog='eval suite'):
                                          or not all(1 <= k <= 8 for k in args.cameras)):
             raise UserError(f'--cameras takes 2 or more distinct camera numbers 1..8 (got {args.cameras})')
         cases = draw_cases(args, parse_resolution(args.resolution))
+        if args.only:
+            if not all(0 <= index < len(cases) for index in args.only):
+                raise UserError(f'--only takes case numbers 0..{len(cases) - 1} of the --cases {len(cases)} drawn')
+            cases = [cases[index] for index in args.only]
         print(f'[suite] {len(cases)} cases × {args.frames} frame sets, seed {args.seed}, {args.jobs} at once',
               file=sys.stderr, flush=True)
         progress = Progress(len(cases), 'suite', unit='cases')
@@ -115,7 +121,9 @@ class CaseResult:
 
     @property
     def per_frame(self):
-        return np.nanmean(self.errors, axis=1) if np.isfinite(self.errors).any() else self.errors[:, 0]
+        """(F,) [mm] the mean joint error of each frame set, NaN where no skeleton came."""
+        fitted = np.isfinite(self.errors).all(axis=1)
+        return np.where(fitted, np.where(fitted[:, None], self.errors, 0.0).mean(axis=1), np.nan)
 
 
 def case_motion(case):
