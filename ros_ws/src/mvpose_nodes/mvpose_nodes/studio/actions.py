@@ -188,6 +188,7 @@ def arms_overhead_and_wave(height=1.75, frame_rate=FRAME_RATE, first_frame=0):
 # --- Stepping: feet that lift off, swing along a path and land, the pelvis following.
 LIFT = 0.07          # [m at REFERENCE_HEIGHT] highest ankle rise during a swing
 SOFT_KNEES = 0.03    # [m at REFERENCE_HEIGHT] the pelvis lowered while stepping, so that no knee locks
+STEPPING_REST = 0.6  # [s] standing before the first step and after the last
 CROUCH = 0.05        # [m at REFERENCE_HEIGHT] the pelvis lowered walking backwards: the feet reach 0.28 m fore and aft
 
 
@@ -199,19 +200,24 @@ def _swing(times, start, end):
     return progress, np.where((times > start) & (times < end), np.sin(np.pi * u), 0.0)
 
 
+def _stepping(height, frame_rate, steps, step_time):
+    """The common frame of the stepping actions: (scale of REFERENCE_HEIGHT, rest [s] standing before and
+    after, duration [s], sample times (T,) [s], the standing body's forward and left (3,), its ankles
+    (2, 3) [m] and their midpoint (3,))."""
+    rest = STEPPING_REST
+    duration = 2 * rest + steps * step_time
+    _, rest_joints, heading = standing_pose(height)
+    ankles = rest_joints[[JOINT_INDEX['left_ankle'], JOINT_INDEX['right_ankle']]]
+    return (height / REFERENCE_HEIGHT, rest, duration, sample_times(duration, frame_rate), heading[:, 1],
+            -heading[:, 0], ankles, ankles.mean(axis=0))
+
+
 def turn_on_the_spot(height=1.75, frame_rate=FRAME_RATE, first_frame=0, steps=9, step_time=0.55, swing_time=0.4):
     """A full turn to the left (360°) on the spot in `steps` small steps (6.15 s): the feet take turns,
     each landing 45° further round than the other (90° per step) and the last one closing up; the body
     turns smoothly to the mean of the feet's headings, the head leading by up to 12°; the pelvis stays
     over the spot, shifting a little towards the standing foot."""
-    scale = height / REFERENCE_HEIGHT
-    rest = 0.6
-    duration = 2 * rest + steps * step_time
-    times = sample_times(duration, frame_rate)
-    _, rest_joints, heading = standing_pose(height)
-    forward, left = heading[:, 1], -heading[:, 0]
-    ankles = rest_joints[[JOINT_INDEX['left_ankle'], JOINT_INDEX['right_ankle']]]
-    centre = ankles.mean(axis=0)
+    scale, rest, duration, times, forward, left, ankles, centre = _stepping(height, frame_rate, steps, step_time)
     half_width = np.dot(ankles[0] - centre, left)
     ankle_height = ANKLE_HEIGHT_PER_HEIGHT * height
     # Foot headings [rad] over time: step k moves foot k % 2 (left first) to 45° beyond the other one.
@@ -262,14 +268,7 @@ def walk_backwards(height=1.75, frame_rate=FRAME_RATE, first_frame=0, steps=8, s
     right foot first, at 100 steps a minute (0.6 m/s), the last step closing up, then standing. The
     stance foot stays put; the pelvis, lowered by CROUCH, moves back smoothly over the stance foot,
     swaying a little towards it; the arms swing against the legs; the trunk leans 4° forward."""
-    scale = height / REFERENCE_HEIGHT
-    rest = 0.6
-    duration = 2 * rest + steps * step_time
-    times = sample_times(duration, frame_rate)
-    _, rest_joints, heading = standing_pose(height)
-    forward, left = heading[:, 1], -heading[:, 0]
-    ankles = rest_joints[[JOINT_INDEX['left_ankle'], JOINT_INDEX['right_ankle']]]
-    centre = ankles.mean(axis=0)
+    scale, rest, duration, times, forward, left, ankles, centre = _stepping(height, frame_rate, steps, step_time)
     length = step_length * scale
     back = np.zeros((len(times), 2))   # each foot's distance back from the start [m]
     lifts = np.zeros((len(times), 2))

@@ -20,7 +20,7 @@ from scipy.spatial.transform import Rotation, Slerp
 
 from mvpose_nodes.body.model import JOINT_INDEX, JOINT_NAMES
 from mvpose_nodes.studio.i3dpost import FRAME_RATE
-from mvpose_nodes.studio.mocap import ANKLE_HEIGHT_PER_HEIGHT, BodyMotion, MotionFileError
+from mvpose_nodes.studio.mocap import ANKLE_HEIGHT_PER_HEIGHT, BodyMotion, MotionFileError, shipped_file
 from mvpose_nodes.studio.scripted_motion import HAND_LENGTH
 
 AMP_BODIES = ('pelvis', 'torso', 'head', 'right_upper_arm', 'right_lower_arm', 'right_hand', 'left_upper_arm',
@@ -130,12 +130,7 @@ def load_amp(path):
 
 def amp_clip(name):
     """A shipped AMP motion by name ('amp_run' or 'amp_run.npy'), loaded; MotionFileError when missing."""
-    directory = motions_directory()
-    path = directory / (name if name.endswith('.npy') else f'{name}.npy')
-    if not path.is_file():
-        known = ', '.join(sorted(p.stem for p in directory.glob('*.npy')))
-        raise MotionFileError(f'no AMP motion {path.name} in {directory} (motions: {known})')
-    return load_amp(path)
+    return load_amp(shipped_file(motions_directory(), name, '.npy', 'AMP motion'))
 
 
 def resampled(motion, frame_rate):

@@ -60,14 +60,19 @@ def cmu_directory():
     return Path(__file__).resolve().parent / 'cmu'
 
 
+def shipped_file(directory, name, suffix, what):
+    """Path of the file `name` (with or without `suffix`, e.g. '.bvh') in `directory`; MotionFileError
+    naming the `what` ('motion-capture clip') and the ones there are when missing."""
+    path = directory / (name if name.endswith(suffix) else f'{name}{suffix}')
+    if not path.is_file():
+        known = ', '.join(sorted(p.stem for p in directory.glob(f'*{suffix}')))
+        raise MotionFileError(f'no {what} {path.name} in {directory} (there are: {known})')
+    return path
+
+
 def cmu_clip(name):
     """Path of a shipped CMU clip by name ('07_01' or '07_01.bvh'); MotionFileError when missing."""
-    directory = cmu_directory()
-    path = directory / (name if name.endswith('.bvh') else f'{name}.bvh')
-    if not path.is_file():
-        clips = ', '.join(sorted(p.stem for p in directory.glob('*.bvh')))
-        raise MotionFileError(f'no motion-capture clip {path.name} in {directory} (clips: {clips})')
-    return path
+    return shipped_file(cmu_directory(), name, '.bvh', 'motion-capture clip')
 
 
 def elementary_rotations(axis, degrees):
