@@ -1,13 +1,13 @@
 """The skeleton_fitter node over DDS, fed features computed here from rendered studio views: a frame set
 that two cameras see is fitted; one that only one camera sees gets STATUS_LOST with the last pose. Bad
-calibration and malformed contours are logged and dropped, and the node keeps running."""
+calibration and malformed contours are logged and dropped, and the node keeps running. Features that come
+before their camera's calibration wait for it."""
 import math
-import time
 
 import numpy as np
 import pytest
 import rclpy
-from common import Publisher, run_mvpose, spin_until, wait_for_graph
+from common import Publisher, run_mvpose, spin_for, spin_until, wait_for_graph
 from mvpose_msgs.msg import LabelledContour, Skeleton, SkinEllipseArray
 from sensor_msgs.msg import Image
 
@@ -64,8 +64,6 @@ def test_a_frame_set_seen_by_one_camera_gets_status_lost_with_the_last_pose(rend
                                    .publish(message, subscribers=0))
         for publisher in calibration:
             publisher.wait_for_subscribers(timeout=30)
-            publisher.wait_for_acknowledgements(timeout=10)
-        time.sleep(0.5)   # acknowledged by the fitter's DDS reader: let its executor take them before features
         for stamp in (first, second):
             for k, (camera, features) in rendered_features.items():
                 header = Image().header
@@ -115,3 +113,39 @@ def test_skeleton_fitter_node_survives_nan_calibration_and_malformed_contours(ba
     assert code == 0, err
     assert '/cam3 calibration unusable: camera_info K is not a valid intrinsic matrix' in err, err
     assert '/cam5/labelled_contour: LabelledContour x, y, labels and sides differ in length; dropped' in err, err
+
+
+def test_features_that_come_before_the_calibration_wait_for_it(rendered_features, background, ros_context):
+    """Issue 13: no frame set is lost at start-up because calibration came after the first images: the
+    fitter holds the frame sets (calibration_wait) and fits them, in order, once it comes."""
+    fitter = background('run', 'skeleton_fitter', '--ros-args', '-p', f'cameras:={list(CAMERAS)}',
+                        '-p', 'calibration_wait:=30.0')
+    node = rclpy.create_node('early_features')
+    received = []
+    node.create_subscription(Skeleton, '/mvpose/skeleton', received.append, LATCHED)
+    publishers = {(k, topic): Publisher(node, kind, f'/cam{k}/{topic}', 10)
+                  for k in CAMERAS for topic, kind in FEATURES.items()}
+    stamps = [frame_stamp_ns(60), frame_stamp_ns(61)]
+    try:
+        for publisher in publishers.values():
+            publisher.wait_for_subscribers(timeout=30)
+        for stamp in stamps:
+            for k, (camera, features) in rendered_features.items():
+                header = set_stamp(Image().header, stamp, optical_frame(k))
+                for topic, message in zip(FEATURES, feature_messages(features, header)):
+                    publishers[(k, topic)].publish(message)
+        for publisher in publishers.values():
+            publisher.wait_for_acknowledgements(timeout=10)
+        spin_for(node, 1.0)   # the features wait, unanswered
+        assert received == [], 'fitted without calibration'
+        for k, (camera, _) in rendered_features.items():
+            for message, topic in zip(calibration_messages(camera, stamps[0]), ('camera_info', 'camera_pose')):
+                Publisher(node, type(message), f'/cam{k}/{topic}', LATCHED).publish(message, subscribers=0)
+        spin_until(node, lambda: {stamp_ns(m.header) for m in received} >= set(stamps), 60,
+                   'skeletons for both frame sets held before the calibration')
+    finally:
+        node.destroy_node()
+    assert [stamp_ns(m.header) for m in received] == stamps, 'in order, each once'
+    assert received[0].status == Skeleton.STATUS_INITIALISING
+    code, _, err = fitter.interrupt()
+    assert code == 0, err

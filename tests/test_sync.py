@@ -172,3 +172,21 @@ def test_max_interval_rejects_wide_sets(offset_ns, expected_sets):
     sets = [synced for synced, _ in feed(sync, messages)]
     assert len(sets) == expected_sets
     assert all(synced.messages['a'] == synced.messages['b'] for synced in sets)
+
+
+def test_held_sets_wait_for_their_calibration_in_order_and_none_is_dropped():
+    from mvpose_nodes.fitting.sync import HeldSets
+    held = HeldSets(wait=2.0, limit=3)
+    calibrated = set()
+    for stamp, now in ((1, 0.0), (2, 0.1), (3, 0.2)):
+        held.add(stamp, now)
+    assert held.release(0.5, lambda s: s in calibrated) == []
+    calibrated.add(2)
+    assert held.release(0.6, lambda s: s in calibrated) == [], 'a later set does not overtake an earlier one'
+    calibrated.add(1)
+    assert held.release(0.7, lambda s: s in calibrated) == [1, 2]
+    assert held.release(2.19, lambda s: False) == [], 'set 3 waits 2 s from its arrival'
+    assert held.release(2.2, lambda s: False) == [3], 'then goes on without its calibration'
+    for stamp in range(10, 15):
+        held.add(stamp, 3.0)
+    assert held.release(3.0, lambda s: False) == [10, 11], 'beyond the limit the oldest go on'

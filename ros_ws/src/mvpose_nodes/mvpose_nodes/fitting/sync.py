@@ -143,3 +143,28 @@ class ApproximateTimeSynchronizer:
             self._last_used_ns[channel] = stamps_ns[channel]
         missing = frozenset(self.groups.values()) - {self.groups[channel] for channel in positions}
         return SyncedSet(max(stamps_ns.values()), messages, stamps_ns, missing)
+
+
+class HeldSets:
+    """Synchronised sets held, in order, until every camera they need is ready (its calibration has
+    come), for at most `wait` seconds each; none is dropped: one that waited longer goes on without the
+    camera, and a later set never overtakes an earlier one. At most `limit` are held (the oldest then
+    goes on). Times are float [s] from one monotonic clock."""
+
+    def __init__(self, wait, limit=100):
+        self.wait, self.limit = wait, limit
+        self.held = []   # [(arrival time, set)] in arrival (stamp) order
+
+    def add(self, synced, now):
+        self.held.append((now, synced))
+
+    def release(self, now, ready):
+        """The sets to handle now, in order: from the front, each that is ready (`ready(set)` is true),
+        waited `wait` or more, or is beyond `limit`; the first that is none of these stops the release."""
+        released = []
+        while self.held:
+            arrived, synced = self.held[0]
+            if not (ready(synced) or now - arrived >= self.wait or len(self.held) > self.limit):
+                break
+            released.append(self.held.pop(0)[1])
+        return released

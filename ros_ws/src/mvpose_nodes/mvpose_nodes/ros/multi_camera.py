@@ -6,11 +6,13 @@ approximate-time synchroniser (fitting/sync.py; a camera silent for camera_timeo
 out until it returns), and its camera_info and camera_pose (latched) turned into a Camera once both
 are there; problems logged once per cause. A subclass names its inputs and handles each frame set.
 """
+import time
+
 from geometry_msgs.msg import PoseStamped
 from rclpy.node import Node
 from sensor_msgs.msg import CameraInfo
 
-from mvpose_nodes.fitting.sync import ApproximateTimeSynchronizer
+from mvpose_nodes.fitting.sync import ApproximateTimeSynchronizer, HeldSets
 from mvpose_nodes.ros.conversions import camera_from_messages, stamp_ns
 from mvpose_nodes.ros.helpers import LATCHED, ReportOnce
 from mvpose_nodes.ros.params import declare_parameters
@@ -20,7 +22,7 @@ class MultiCameraNode(ReportOnce, Node):
     """A node fed by synchronised per-camera topics. inputs: {relative topic name: message class},
     subscribed as /cam<K>/<name> for each configured camera; parameters: the node's table
     (ros/params.py, starting with multi_camera_parameters), declared here, values in self.values;
-    on_frame_set(frame_set) gets each synchronised set (fitting.sync.FrameSet: messages keyed by
+    on_frame_set(frame_set) gets each synchronised set (fitting.sync.SyncedSet: messages keyed by
     (camera, name), missing_groups)."""
 
     def __init__(self, name, inputs, parameters):
@@ -35,6 +37,10 @@ class MultiCameraNode(ReportOnce, Node):
             timeout_ns=int(self.values['camera_timeout'] * 1e9))
         self.calibration = {k: {} for k in cameras}
         self.cameras_known = {}   # camera number -> Camera, from its latest calibration messages
+        # Frame sets that come before a camera's calibration wait for it (calibration_wait), in order.
+        self.held = HeldSets(self.values['calibration_wait'])
+        self.given_up = set()     # cameras whose calibration a frame set stopped waiting for
+        self.create_timer(0.1, self.release_held)
         for k in cameras:
             for topic, kind in inputs.items():
                 self.create_subscription(kind, f'/cam{k}/{topic}', self.receiver(k, topic), 10)
@@ -52,13 +58,32 @@ class MultiCameraNode(ReportOnce, Node):
                 except ValueError as error:
                     self.cameras_known.pop(camera, None)
                     self.report_once(f'bad calibration {camera}', f'/cam{camera} calibration unusable: {error}')
+                self.given_up.discard(camera)
+                self.release_held()
         return receive
 
     def receiver(self, camera, topic):
         def receive(message):
             for frame_set in self.sync.add((camera, topic), stamp_ns(message.header), message):
-                self.on_frame_set(frame_set)
+                self.held.add(frame_set, time.monotonic())
+            self.release_held()
         return receive
+
+    def awaited_cameras(self, frame_set):
+        """The cameras of a frame set whose calibration has not come (and is still waited for)."""
+        present = {camera for camera, _ in frame_set.messages}
+        return {k for k in present if len(self.calibration[k]) < 2 and k not in self.given_up}
+
+    def release_held(self):
+        """Handle the held frame sets whose calibration is in, or that waited calibration_wait."""
+        for frame_set in self.held.release(time.monotonic(), lambda s: not self.awaited_cameras(s)):
+            missing = self.awaited_cameras(frame_set)
+            if missing:
+                self.given_up |= missing
+                self.report_once('calibration wait', f'no camera_info/camera_pose for camera(s) {sorted(missing)} '
+                                                     f"within calibration_wait ({self.held.wait:g} s): going on "
+                                                     'without them until they come')
+            self.on_frame_set(frame_set)
 
     def camera(self, number):
         """The Camera of `number`, or None (logged once) while its calibration is missing or unusable."""

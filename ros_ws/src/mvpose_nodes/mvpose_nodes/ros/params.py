@@ -193,6 +193,9 @@ def multi_camera_parameters(what):
                   read_only=True),
         Parameter('camera_timeout', 1.0, '[s] of input time after which a silent camera is left out '
                   '(status DEGRADED)', range=(0.01, 60.0), read_only=True),
+        Parameter('calibration_wait', 2.0, '[s] longest a frame set waits for a camera\'s camera_info and '
+                  'camera_pose that have not come yet (then it goes on without that camera)', range=(0.0, 60.0),
+                  read_only=True),
     )
 
 
