@@ -63,8 +63,9 @@ def fit_bag(args):
             for number in sorted(frame_set.images):
                 features = extractors[number](frame_set.images[number])
                 if features.person:
+                    skin = [(*e.center, e.area) for e in features.ellipses]
                     views.append(view_from_features(frame_set.cameras[number], features.visible_keypoints(),
-                                                    features.contour, features.frontness))
+                                                    features.contour, features.frontness, skin))
             try:
                 if profiler:
                     profiler.enable()

@@ -17,8 +17,9 @@ import numpy as np
 
 from mvpose_nodes.body.kinematics import forward_kinematics, inverse_kinematics
 from mvpose_nodes.body.model import JOINT_INDEX, STAGE_NAMES
-from mvpose_nodes.fitting.initialisation import completed_joints, labelled_joints, person_lengths, triangulated_joints
-from mvpose_nodes.fitting.limb_sides import LimbTracks, facing_travel, oriented_view
+from mvpose_nodes.fitting.initialisation import (PAIRED_LIMBS, completed_joints, labelled_joints, person_lengths,
+                                                 triangulated_joints)
+from mvpose_nodes.fitting.limb_sides import LimbTracks, exchange, face_votes, facing_travel, oriented_view
 from mvpose_nodes.fitting.objective import boundary_distances, outline_of
 from mvpose_nodes.fitting.settings import FitterSettings
 from mvpose_nodes.fitting.stage_search import StageSearch, stage_indices
@@ -30,13 +31,14 @@ TORSO_POSITION = stage_indices('torso')[:3]   # torso_x, torso_y, torso_z: the r
 class View:
     """One camera's evidence for one frame: its Camera, the boundary distance maps of its labelled
     contour (objective.BoundaryDistances, or None), its 2D keypoints {name: (x, y, confidence)}, how
-    much of the face it sees (features.Features.frontness; None if unknown) and its outline
-    (objective.Outline, or None)."""
+    much of the face it sees (features.Features.frontness; None if unknown), its outline
+    (objective.Outline, or None) and its skin regions (N, 3): centre x, y [px] and area [px²] (or None)."""
     camera: object
     distances: object
     keypoints: dict
     frontness: float = None
     outline: object = None
+    skin: np.ndarray = None
 
 
 @dataclass
@@ -82,9 +84,13 @@ class SkeletonFitter:
             parameters[TORSO_POSITION] += predicted[pelvis] - self.tracks.history[-1][1][pelvis]
         found = None if initialised else triangulated_joints(views, settings)
         if not initialised:
-            parameters, turned = facing_travel(parameters, self.lengths, self.tracks.walking_right(),
-                                               np.radians(settings.travel_yaw_limit_deg))
-            self.turns += turned
+            turned, turn = facing_travel(parameters, self.lengths, self.tracks.walking_right(),
+                                         np.radians(settings.travel_yaw_limit_deg))
+            # People walk forwards, unless the faces the views see say otherwise (walking backwards).
+            if turn and (face_votes(views, forward_kinematics(turned, self.lengths)[0])
+                         >= face_votes(views, forward_kinematics(parameters, self.lengths)[0])):
+                parameters = turned
+                self.turns += 1
         reference, _ = forward_kinematics(parameters, self.lengths)
         if found is not None:
             self.tracks.label(stamp, found)
@@ -117,22 +123,32 @@ class SkeletonFitter:
         return Fit(joints, parameters, results, initialised, time.perf_counter() - started)
 
     def initial_parameters(self, views):
-        """Angles (29,) from triangulated keypoints (paper 000 Sec. 3.1 and 6; paper 004), or None. The
-        first initialisation also measures the person (initialisation.person_lengths)."""
+        """Angles (29,) from triangulated keypoints (paper 000 Sec. 3.1 and 6; paper 004), or None: the
+        pairs labelled by the face where a view sees it (initialisation.labelled_joints), or all the other
+        way round (the torso facing the other way) when the skin in the views' heads says so better
+        (limb_sides.face_votes). The first initialisation also measures the person
+        (initialisation.person_lengths)."""
         joints = labelled_joints(views, self.settings)
         if joints is None:
             return None
         if self.lengths is None:
             self.lengths = person_lengths(joints, self.settings)
             self.stages = StageSearch(self.settings, self.lengths)
-        return inverse_kinematics(completed_joints(joints, self.lengths))
+        mirrored = dict(joints)
+        for limb in PAIRED_LIMBS:
+            exchange(mirrored, limb)
+        starts = [completed_joints(labelled, self.lengths) for labelled in (joints, mirrored)]
+        best = max(range(2), key=lambda k: (face_votes(views, starts[k]), -k))
+        return inverse_kinematics(starts[best])
 
 
-def view_from_features(camera, keypoints, contour, frontness=None):
+def view_from_features(camera, keypoints, contour, frontness=None, skin=None):
     """A View of one camera from its features: keypoints {name: (x, y, confidence)} (the visible ones),
-    its ContourLabels (or None) and its frontness."""
+    its ContourLabels (or None), its frontness and its skin regions [(x, y, area)] (the skin ellipses'
+    centres [px] and areas [px²])."""
     distances = outline = None
     if contour is not None and len(contour.points):
         distances = boundary_distances(contour, (camera.width, camera.height))
         outline = outline_of(contour.points)
-    return View(camera, distances, keypoints, frontness, outline)
+    skin = None if skin is None else np.asarray(skin, float).reshape(-1, 3)
+    return View(camera, distances, keypoints, frontness, outline, skin)

@@ -51,8 +51,9 @@ class FrameSetFitter:
             except ValueError as error:
                 problems.append((f'contour {number}', f'/cam{number}/labelled_contour: {error}; dropped'))
                 continue
+            skin = [(e.center_x, e.center_y, e.area) for e in ellipses.ellipses]
             views.append(view_from_features(camera, keypoints_from_messages(ellipses, contour), labels,
-                                            ellipses.face_visibility))
+                                            ellipses.face_visibility, skin))
         if len(views) < 2:
             return self.lost(stamp_ns, problems, 'few views', f'fewer than 2 cameras with a person at {stamp_ns} ns')
         try:
