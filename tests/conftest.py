@@ -13,7 +13,6 @@ synth_bag (./mvpose synth bags made once per session), cmu_walk (the CMU walk lo
 helpers are in common.py."""
 import ast
 import configparser
-import dataclasses
 import importlib.abc
 import os
 import re
@@ -177,11 +176,5 @@ def synth_bag(tmp_path_factory):
 def cmu_walk():
     """The CMU walk 07_01 retargeted to the body model (studio.mocap.retarget's defaults: 1.75 m, the
     studio's frame rate), loaded once. Its arrays are read-only: take .placed(), .select() or copies."""
-    import numpy as np
     from mvpose_nodes.studio.mocap import cmu_clip, load_bvh, retarget
-    motion = retarget(load_bvh(cmu_clip('07_01')))
-    for field in dataclasses.fields(motion):
-        value = getattr(motion, field.name)
-        if isinstance(value, np.ndarray):
-            value.setflags(write=False)
-    return motion
+    return retarget(load_bvh(cmu_clip('07_01'))).read_only()

@@ -21,18 +21,23 @@ FRAMES = 50
 DRAWS = 200
 
 
+def draw_cases(seed, count, motions, frames, resolution):
+    """Cases 0..count−1 of a run seeded `seed`, each from its own case_rng(seed, k), as the suite draws them."""
+    return [cases.draw_case(cases.case_rng(seed, index), index, motions, frames, resolution) for index in range(count)]
+
+
 @pytest.fixture(scope='module')
 def drawn():
-    return cases.draw_cases(11, DRAWS, MOTIONS, FRAMES, (1920, 1080))
+    return draw_cases(11, DRAWS, MOTIONS, FRAMES, (1920, 1080))
 
 
 def test_same_seed_gives_the_same_cases_and_other_seeds_do_not():
-    first = cases.draw_cases(5, 6, MOTIONS, FRAMES, (960, 540))
-    again = cases.draw_cases(5, 6, MOTIONS, FRAMES, (960, 540))
+    first = draw_cases(5, 6, MOTIONS, FRAMES, (960, 540))
+    again = draw_cases(5, 6, MOTIONS, FRAMES, (960, 540))
     assert all(cases.same_case(a, b) for a, b in zip(first, again))
     # A case depends on (seed, index) only, not on how many are drawn.
     assert cases.same_case(first[4], cases.draw_case(cases.case_rng(5, 4), 4, MOTIONS, FRAMES, (960, 540)))
-    other = cases.draw_cases(6, 6, MOTIONS, FRAMES, (960, 540))
+    other = draw_cases(6, 6, MOTIONS, FRAMES, (960, 540))
     assert not any(cases.same_case(a, b) for a, b in zip(first, other))
     assert all(cases.describe_case(a) != cases.describe_case(b) for a, b in zip(first, other))
     # Cameras given: everything else is drawn as before.
@@ -148,7 +153,7 @@ def standing_people(height, radius):
 def test_every_camera_of_a_drawn_rig_sees_a_tall_person_standing_near_the_middle(drawn, resolution):
     people = standing_people(cases.PERSON_HEIGHT[1], cases.CENTRE_RADIUS).reshape(-1, 3)
     width, height = resolution
-    rigs = drawn if resolution == (1920, 1080) else cases.draw_cases(12, DRAWS, MOTIONS, FRAMES, resolution)
+    rigs = drawn if resolution == (1920, 1080) else draw_cases(12, DRAWS, MOTIONS, FRAMES, resolution)
     for case in rigs:
         for camera in case.rig:
             pixels, depth = camera.project(people)
@@ -205,7 +210,7 @@ def test_every_drawn_colour_is_the_person_in_every_camera_of_its_case(drawn):
 
 
 def test_the_empty_studio_stays_blue_screen_in_the_darkest_warmest_case():
-    for case in cases.draw_cases(2, 4, MOTIONS, FRAMES, (192, 108)):
+    for case in draw_cases(2, 4, MOTIONS, FRAMES, (192, 108)):
         for camera in case.rig:
             view = scene.prepare_camera(camera, texture_seed=camera.number)
             shadowed = scene.Rendering(view.background * (1 - scene.SHADOW_STRENGTH), None)

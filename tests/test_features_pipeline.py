@@ -25,8 +25,7 @@ def studio_frame(cmu_walk):
     pose = scene.BodyPose(motion.joints[i], motion.toes[i], motion.hand_tips[i], motion.head_forward[i])
     camera = studio_rig((960, 540), cameras=[3])[0]
     view = scene.prepare_camera(camera)
-    rendering = scene.render(view, pose, scene.Appearance(), scene.shadow_map(
-        scene.body_primitives(pose, scene.Appearance()), pose.joints[0, :2]), pose.joints[0, :2])
+    rendering = scene.render(view, pose, scene.Appearance(), *scene.floor_shadow(pose, scene.Appearance()))
     rgb, labels = scene.Realism().finish(rendering, view, 3, 0, 0)
     empty, _ = scene.Realism().finish(scene.Rendering(view.background, np.zeros_like(labels)), view, 3, 0, 0)
     return rgb, labels, camera, pose, empty

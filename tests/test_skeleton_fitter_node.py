@@ -35,10 +35,10 @@ def rendered_features(cmu_walk):
     pose = scene.BodyPose(motion.joints[i], motion.toes[i], motion.hand_tips[i], motion.head_forward[i])
     extractor = FeatureExtractor(FeatureSettings(), SkinModel.load(default_skin_model_path()))
     found = {}
+    shadow = scene.floor_shadow(pose, scene.Appearance())
     for camera in studio_rig((960, 540), cameras=list(CAMERAS)):
         view = scene.prepare_camera(camera)
-        shadow = scene.shadow_map(scene.body_primitives(pose, scene.Appearance()), pose.joints[0, :2])
-        rendering = scene.render(view, pose, scene.Appearance(), shadow, pose.joints[0, :2])
+        rendering = scene.render(view, pose, scene.Appearance(), *shadow)
         rgb, _ = scene.Realism().finish(rendering, view, camera.number, 0, 0)
         found[camera.number] = camera, extractor(rgb)
     return found

@@ -16,7 +16,7 @@ its worst frame over the cameras it used.
 import math
 import sys
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -68,11 +68,10 @@ def chosen_motions(text):
 def draw_cases(args, resolution):
     """The cases of a run: motions cycled through in a seeded order (every chosen motion once before any
     twice), everything else drawn per case by studio.cases.draw_case."""
-    from mvpose_nodes.studio.cases import draw_case
+    from mvpose_nodes.studio.cases import case_rng, draw_case
     motions = chosen_motions(args.motions)
-    rng = np.random.default_rng(args.seed)
-    order = [motions[i] for i in rng.permutation(len(motions))]
-    return [draw_case(np.random.default_rng([args.seed, index]), index, (order[index % len(order)],),
+    order = [motions[i] for i in np.random.default_rng(args.seed).permutation(len(motions))]
+    return [draw_case(case_rng(args.seed, index), index, (order[index % len(order)],),
                       args.frames, resolution, cameras=args.cameras) for index in range(args.cases)]
 
 
@@ -113,7 +112,7 @@ class CaseResult:
     fit_seconds: list
     joints: np.ndarray            # (F, 15, 3) [m] fitted, NaN where none
     truth: np.ndarray             # (F, 15, 3) [m]
-    swapped: np.ndarray = field(default=None)   # (F,) bool: a left/right pair nearer the other side's truth
+    swapped: np.ndarray           # (F,) bool: a left/right pair nearer the other side's truth
 
     @property
     def mean_error(self):
@@ -154,10 +153,7 @@ def render_camera(case, view, motion, index):
     from mvpose_nodes.studio.i3dpost import FRAME_RATE
     number = view.camera.number
     pose = pose_at(motion, index + case.jitter[case.cameras.index(number)] * FRAME_RATE)
-    shadow = centre = None
-    if case.shadows:
-        centre = pose.joints[0, :2]
-        shadow = scene.shadow_map(scene.body_primitives(pose, case.appearance), centre)
+    shadow, centre = scene.floor_shadow(pose, case.appearance) if case.shadows else (None, None)
     rendering = scene.render(view, pose, case.appearance, shadow, centre)
     rgb, _ = case.realism.finish(rendering, view, number, case.seed, index)
     ok, data = cv2.imencode('.jpg', cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR), [cv2.IMWRITE_JPEG_QUALITY, case.jpeg_quality])
@@ -167,7 +163,7 @@ def render_camera(case, view, motion, index):
 def run_case(case):
     """Render, extract and fit every frame set of a case; its CaseResult."""
     from std_msgs.msg import Header
-    from mvpose_nodes.app.reports.accuracy import joint_errors_mm
+    from mvpose_nodes.app.reports.accuracy import joint_errors_mm, swapped_pairs
     from mvpose_nodes.fitting.settings import FitterSettings
     from mvpose_nodes.ros.camera_bag import frame_stamp_ns
     from mvpose_nodes.ros.conversions import feature_messages, joints_from_skeleton, optical_frame, set_stamp
@@ -201,24 +197,8 @@ def run_case(case):
             statuses[index] = result.message.status
             seconds.append(result.message.fit_time)
     truth = motion.joints
-    errors = joint_errors_mm(joints, truth)
-    return CaseResult(case, errors, statuses, seconds, joints, truth, swapped_frames(joints, truth))
-
-
-def swapped_frames(fitted, truth):
-    """(F,) bool: frames where a left/right pair (ankles, knees, wrists, elbows) is nearer the other
-    side's truth than its own."""
-    from mvpose_nodes.app.reports.accuracy import SWAPPABLE_JOINTS
-    from mvpose_nodes.body.model import JOINT_INDEX
-    swapped = np.zeros(len(fitted), bool)
-    for name in SWAPPABLE_JOINTS:
-        left, right = JOINT_INDEX[f'left_{name}'], JOINT_INDEX[f'right_{name}']
-        straight = np.linalg.norm(fitted[:, left] - truth[:, left], axis=1) + \
-            np.linalg.norm(fitted[:, right] - truth[:, right], axis=1)
-        crossed = np.linalg.norm(fitted[:, left] - truth[:, right], axis=1) + \
-            np.linalg.norm(fitted[:, right] - truth[:, left], axis=1)
-        swapped |= crossed < straight
-    return swapped
+    return CaseResult(case, joint_errors_mm(joints, truth), statuses, seconds, joints, truth,
+                      swapped_pairs(joints, truth).any(axis=1))
 
 
 def report(results):

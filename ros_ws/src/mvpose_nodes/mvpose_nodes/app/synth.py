@@ -101,10 +101,7 @@ def render_frame(frame):
     from mvpose_nodes.ros.conversions import compressed_image, compressed_labels
     number, pose = frame
     settings = _SETTINGS
-    shadow = center = None
-    if settings.shadow:
-        center = pose.joints[0, :2]
-        shadow = scene.shadow_map(scene.body_primitives(pose, settings.appearance), center)
+    shadow, center = scene.floor_shadow(pose, settings.appearance) if settings.shadow else (None, None)
     outputs = []
     for view in settings.views:
         markers = None

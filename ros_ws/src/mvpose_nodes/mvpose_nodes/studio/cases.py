@@ -100,17 +100,11 @@ def case_rng(seed, index):
     return np.random.default_rng([seed, index])
 
 
-def draw_cases(seed, count, motions, frames, resolution, cameras=None, all_cameras_share=ALL_CAMERAS_SHARE):
-    """Cases 0..count−1 of a run: case k from case_rng(seed, k), so it does not depend on `count`."""
-    return [draw_case(case_rng(seed, index), index, motions, frames, resolution, cameras, all_cameras_share)
-            for index in range(count)]
-
-
 def draw_case(rng, index, motions, frames, resolution, cameras=None, all_cameras_share=ALL_CAMERAS_SHARE):
     """A Case drawn from `rng` (numpy Generator).
 
     motions: the motion names to choose from (uniformly), or {name: its length in frames} (or {name:
-    BodyMotion}); names alone are looked up in studio.catalogue (load_motion at the drawn height).
+    BodyMotion}); names alone are looked up in studio.catalogue (motion_length).
     frames: the window's length; resolution: (width, height) [px]; cameras: the camera numbers to use
     instead of drawn ones (None: draw)."""
     names = list(motions)
@@ -118,10 +112,10 @@ def draw_case(rng, index, motions, frames, resolution, cameras=None, all_cameras
         raise ValueError('draw_case needs at least one motion')
     width, image_height = resolution
 
-    # The motion and the person's height (the motion's length may depend on it).
+    # The motion and the person's height.
     motion = names[int(rng.integers(len(names)))]
     height = float(rng.uniform(*PERSON_HEIGHT))
-    length = _motion_length(motions, motion, height)
+    length = _motion_length(motions, motion)
     first_frame = rng.random() < FIRST_FRAME_SHARE
     start_fraction = rng.random()
     count = min(int(frames), length)
@@ -176,13 +170,13 @@ def draw_case(rng, index, motions, frames, resolution, cameras=None, all_cameras
                 resolution=(int(width), int(image_height)))
 
 
-def _motion_length(motions, name, height):
+def _motion_length(motions, name):
     """Frames of motion `name` (see draw_case's `motions`)."""
     if isinstance(motions, Mapping):
         value = motions[name]
         return len(value.joints) if hasattr(value, 'joints') else int(value)
-    from mvpose_nodes.studio.catalogue import load_motion
-    return len(load_motion(name, height=height).joints)
+    from mvpose_nodes.studio.catalogue import motion_length
+    return motion_length(name)
 
 
 def _pick(rng, table):

@@ -102,16 +102,18 @@ def _long_enough_bvh(bvh):
     if missing <= 0:
         return bvh
     start, stop = bvh_cycle(bvh)
-    return looped_bvh(bvh, start, stop, 1 + math.ceil(missing / ((stop - start) * bvh.frame_time)))
+    return looped_bvh(bvh, start, stop, _plays(missing, (stop - start) * bvh.frame_time))
 
 
-def _read_only(motion):
-    """The motion with its arrays made read-only: a cached motion is shared by every caller."""
-    arrays = {field.name: np.array(getattr(motion, field.name)) for field in dataclasses.fields(motion)
-              if isinstance(getattr(motion, field.name), np.ndarray)}
-    for array in arrays.values():
-        array.setflags(write=False)
-    return dataclasses.replace(motion, **arrays)
+def _plays(missing, cycle):
+    """How often a cycle of `cycle` [s] is played for a motion `missing` [s] short of MINIMUM_DURATION."""
+    return 1 + math.ceil(missing / cycle)
+
+
+def motion_length(name):
+    """Frames of motion `name` at the studio's frame rate: the same for every height (the motions are
+    resampled by time), so it is read off the default height's motion, which is cached."""
+    return len(load_motion(name).joints)
 
 
 @functools.lru_cache(maxsize=None)
@@ -130,8 +132,8 @@ def load_motion(name, height=1.75, frame_rate=FRAME_RATE):
         missing = MINIMUM_DURATION - clip.duration
         if missing > 0:
             start, stop = amp.best_cycle(clip)
-            clip = amp.looped(clip, start, stop, 1 + math.ceil(missing / ((stop - start) * clip.frame_time)))
+            clip = amp.looped(clip, start, stop, _plays(missing, (stop - start) * clip.frame_time))
         motion = amp.body_motion(clip, height, frame_rate)
     else:
         motion = getattr(actions, name)(height=height, frame_rate=frame_rate)
-    return _read_only(motion)
+    return motion.read_only()   # cached: shared by every caller

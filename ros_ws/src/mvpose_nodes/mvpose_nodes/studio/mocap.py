@@ -255,6 +255,14 @@ class BodyMotion:
     hand_tips: np.ndarray
     head_forward: np.ndarray
 
+    def read_only(self):
+        """The motion with read-only copies of its arrays, for one shared by several users."""
+        arrays = {field.name: np.array(getattr(self, field.name)) for field in dataclasses.fields(self)
+                  if isinstance(getattr(self, field.name), np.ndarray)}
+        for array in arrays.values():
+            array.setflags(write=False)
+        return dataclasses.replace(self, **arrays)
+
     @property
     def frame_numbers(self):
         """(F,) int64 frame numbers first_frame, first_frame + 1, …"""

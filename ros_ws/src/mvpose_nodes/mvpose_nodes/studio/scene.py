@@ -344,6 +344,12 @@ def prepare_camera(camera, texture_seed=0):
     return CameraRays(camera, rays.astype(np.float32), background, floor_xy, maps)
 
 
+def floor_shadow(pose, appearance):
+    """(shadow map, its centre (2,) [m]) of the person's soft shadow on the floor, for `render`."""
+    centre = pose.joints[0, :2]
+    return shadow_map(body_primitives(pose, appearance), centre), centre
+
+
 def shadow_map(solids, center_xy):
     """Soft floor shadow (S, S) float32 in [0, SHADOW_STRENGTH] around `center_xy` under an overhead light."""
     size = int(round(2 * SHADOW_EXTENT / SHADOW_GRID))

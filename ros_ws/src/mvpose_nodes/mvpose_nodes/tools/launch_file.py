@@ -41,6 +41,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import yaml
+from ament_index_python.packages import PackageNotFoundError, get_package_prefix
 
 from mvpose_nodes.tools.cli import UserError
 
@@ -54,7 +55,9 @@ ACTION_KEYS = {
 PARAM_KEYS = ('from', 'name', 'value')
 REMAP_KEYS = ('from', 'to')
 OUTPUTS = ('screen', 'both')
-SUBSTITUTIONS = ('var', 'env', 'find-pkg-share', 'find-pkg-prefix', 'exec-in-pkg', 'dirname')
+# The supported substitutions, with the (fewest, most) arguments each takes.
+SUBSTITUTION_ARGUMENTS = {'var': (1, 2), 'env': (1, 2), 'find-pkg-share': (1, 1), 'find-pkg-prefix': (1, 1),
+                          'exec-in-pkg': (2, 2), 'dirname': (0, 0)}
 IDENTIFIER = re.compile(r'[A-Za-z][A-Za-z0-9_-]*')
 NAMESPACE = re.compile(r'/|(/[A-Za-z_][A-Za-z0-9_]*)+')
 SCALARS = (bool, int, float, str)
@@ -77,11 +80,11 @@ class Argument:
 
 
 def package_prefix(package):
-    """The install prefix of `package` (in AMENT_PREFIX_PATH, as ament_index finds it), or None."""
-    for prefix in filter(None, os.environ.get('AMENT_PREFIX_PATH', '').split(os.pathsep)):
-        if Path(prefix, 'share', 'ament_index', 'resource_index', 'packages', package).is_file():
-            return Path(prefix)
-    return None
+    """The install prefix of `package` (ament_index's), or None."""
+    try:
+        return Path(get_package_prefix(package))
+    except PackageNotFoundError:
+        return None
 
 
 def package_executable(package, name):
@@ -449,11 +452,9 @@ class Substitutions:
         return ''.join(parts), index
 
     def _perform(self, name, arguments):
-        counts = {'var': (1, 2), 'env': (1, 2), 'find-pkg-share': (1, 1), 'find-pkg-prefix': (1, 1),
-                  'exec-in-pkg': (2, 2), 'dirname': (0, 0)}
-        if name not in counts:
-            raise UserError(f"unsupported substitution '$({name})' (supported: {', '.join(SUBSTITUTIONS)})")
-        low, high = counts[name]
+        if name not in SUBSTITUTION_ARGUMENTS:
+            raise UserError(f"unsupported substitution '$({name})' (supported: {', '.join(SUBSTITUTION_ARGUMENTS)})")
+        low, high = SUBSTITUTION_ARGUMENTS[name]
         if not low <= len(arguments) <= high:
             wanted = str(low) if low == high else f'{low} or {high}'
             raise UserError(f'$({name}) takes {wanted} argument{"s" * (high != 1)}, got {len(arguments)}')

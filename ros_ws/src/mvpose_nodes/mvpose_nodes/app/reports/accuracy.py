@@ -19,17 +19,23 @@ def joint_errors_mm(fitted, truth):
     return np.linalg.norm(fitted - truth, axis=-1) * 1000.0
 
 
-def limb_swaps(fitted, truth):
-    """How many (frame, left/right pair) have the pair nearer the other side's truth; (F, 15, 3) each."""
+def swapped_pairs(fitted, truth):
+    """(F, 4) bool: per frame and left/right pair (SWAPPABLE_JOINTS), whether the fitted pair lies nearer
+    the other side's truth than its own; fitted and truth (F, 15, 3) [m] (NaN: never swapped)."""
     distance = joint_errors_mm(fitted, truth)
-    swaps = 0
+    swapped = []
     for side in SWAPPABLE_JOINTS:
         left, right = JOINT_INDEX[f'left_{side}'], JOINT_INDEX[f'right_{side}']
         straight = distance[:, left] + distance[:, right]
         crossed = (np.linalg.norm(fitted[:, left] - truth[:, right], axis=1)
                    + np.linalg.norm(fitted[:, right] - truth[:, left], axis=1)) * 1000.0
-        swaps += int(np.sum(crossed < straight))
-    return swaps
+        swapped.append(crossed < straight)
+    return np.column_stack(swapped)
+
+
+def limb_swaps(fitted, truth):
+    """How many (frame, left/right pair) have the pair nearer the other side's truth; (F, 15, 3) each."""
+    return int(swapped_pairs(fitted, truth).sum())
 
 
 def print_table_2(fitted, truth, bag):
