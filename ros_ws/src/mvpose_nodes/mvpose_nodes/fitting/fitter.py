@@ -19,7 +19,8 @@ from mvpose_nodes.body.kinematics import forward_kinematics, inverse_kinematics
 from mvpose_nodes.body.model import JOINT_INDEX, STAGE_NAMES
 from mvpose_nodes.fitting.initialisation import (PAIRED_LIMBS, completed_joints, labelled_joints, person_lengths,
                                                  triangulated_joints)
-from mvpose_nodes.fitting.limb_sides import LimbTracks, exchange, face_votes, facing_travel, oriented_view
+from mvpose_nodes.fitting.limb_sides import (FacingWatch, LimbTracks, exchange, face_votes, facing_travel,
+                                             foot_evidence, mirrored_joints, oriented_view)
 from mvpose_nodes.fitting.objective import boundary_distances, outline_of
 from mvpose_nodes.fitting.settings import FitterSettings
 from mvpose_nodes.fitting.stage_search import StageSearch, stage_indices
@@ -62,6 +63,8 @@ class SkeletonFitter:
         self.tracks = LimbTracks(self.settings)
         self.stages = None   # StageSearch, once the person's bone lengths are known
         self.turns = 0   # times the torso was turned to face the direction of travel (facing_travel)
+        self.facing = FacingWatch(self.settings)
+        self.flips = 0   # times the fit was turned round because the feet pointed backwards
 
     def fit(self, stamp, views):
         started = time.perf_counter()
@@ -75,6 +78,7 @@ class SkeletonFitter:
                 raise ValueError('too few views with keypoints to initialise (need root, neck and head in 2 views)')
             self.parameters, initialised = start, True
             self.tracks.restart()
+            self.facing.clear()
         self.stages.new_frame()
         parameters = self.parameters.copy()
         predicted = None if initialised else self.tracks.predicted(stamp)
@@ -91,9 +95,29 @@ class SkeletonFitter:
                          >= face_votes(views, forward_kinematics(parameters, self.lengths)[0])):
                 parameters = turned
                 self.turns += 1
-        reference, _ = forward_kinematics(parameters, self.lengths)
         if found is not None:
             self.tracks.label(stamp, found)
+        parameters, results = self.search_stages(parameters, views, found)
+        self.facing.append(foot_evidence(views, forward_kinematics(parameters, self.lengths)[0]))
+        if self.facing.wrong():  # turn round: the same points, every pair the other way
+            mirrored = mirrored_joints(forward_kinematics(parameters, self.lengths)[0])
+            for limb in PAIRED_LIMBS:
+                exchange(found or {}, limb)
+            self.tracks.mirror()
+            self.facing.clear()
+            self.flips += 1
+            parameters, results = self.search_stages(inverse_kinematics(mirrored), views, found)
+        self.parameters = parameters
+        joints, _ = forward_kinematics(parameters, self.lengths)
+        self.tracks.append(stamp, joints)
+        return Fit(joints, parameters, results, initialised, time.perf_counter() - started)
+
+    def search_stages(self, parameters, views, found):
+        """The six stages of paper 000 Sec. 5.1 from `parameters` (29,), each limb stage started from
+        whichever fits better of them and the frame's triangulated joints `found` ({joint: (3,)} or
+        None) (Sec. 5.3). Returns the fitted parameters and the stage_search.StageResults."""
+        reference, _ = forward_kinematics(parameters, self.lengths)
+        if found is not None:
             for name, position in found.items():
                 reference[JOINT_INDEX[name]] = position
         candidate = None
@@ -117,10 +141,7 @@ class SkeletonFitter:
                     parameters = alternative
             parameters, result = self.stages.search(stage, parameters, oriented, assigned)
             results.append(result)
-        self.parameters = parameters
-        joints, _ = forward_kinematics(parameters, self.lengths)
-        self.tracks.append(stamp, joints)
-        return Fit(joints, parameters, results, initialised, time.perf_counter() - started)
+        return parameters, results
 
     def initial_parameters(self, views):
         """Angles (29,) from triangulated keypoints (paper 000 Sec. 3.1 and 6; paper 004), or None: the
@@ -138,7 +159,11 @@ class SkeletonFitter:
         for limb in PAIRED_LIMBS:
             exchange(mirrored, limb)
         starts = [completed_joints(labelled, self.lengths) for labelled in (joints, mirrored)]
-        best = max(range(2), key=lambda k: (face_votes(views, starts[k]), -k))
+        feet = foot_evidence(views, starts[0])
+        if abs(feet) >= self.settings.facing_evidence:
+            best = 0 if feet > 0 else 1
+        else:
+            best = max(range(2), key=lambda k: (face_votes(views, starts[k]), -k))
         return inverse_kinematics(starts[best])
 
 

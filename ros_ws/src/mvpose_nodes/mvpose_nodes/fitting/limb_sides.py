@@ -12,6 +12,7 @@ import numpy as np
 
 from mvpose_nodes.body.kinematics import forward_kinematics
 from mvpose_nodes.body.model import JOINT_INDEX, LABEL_LEFT_LEG, LABEL_RIGHT_LEG, PARAMETER_INDEX
+from mvpose_nodes.fitting.objective import outside_distances
 
 SWAPPABLE = {'legs': ('knee', 'ankle'), 'arms': ('elbow', 'wrist')}
 
@@ -52,6 +53,10 @@ class LimbTracks:
     def restart(self):
         self.history.clear()
         self.anchored = False
+
+    def mirror(self):
+        """Exchange every pair in the remembered fits (the fit was turned round: limb_sides.mirrored_joints)."""
+        self.history = [(t, mirrored_joints(joints)) for t, joints in self.history]
 
     def append(self, stamp, joints):
         baseline = self.settings.walking_baseline
@@ -183,10 +188,7 @@ def face_votes(views, joints):
     up = joints[JOINT_INDEX['head']] - joints[JOINT_INDEX['neck']]
     up /= max(np.linalg.norm(up), 1e-9)
     centre = joints[JOINT_INDEX['head']] - HEAD_CENTRE_BELOW_TOP * up
-    right = joints[JOINT_INDEX['right_hip']] - joints[JOINT_INDEX['left_hip']]
-    forward = np.cross([0.0, 0.0, 1.0], right)
-    forward[2] = 0.0
-    forward /= max(np.linalg.norm(forward), 1e-9)
+    forward = torso_forward(joints)
     votes = 0
     for view in views:
         if view.skin is None or not len(view.skin):
@@ -204,3 +206,74 @@ def face_votes(views, joints):
         face = view.skin[inside, 2].sum() >= FACE_SKIN_SHARE * np.pi * radius ** 2
         votes += 1 if face == (cos > 0) else -1
     return votes
+
+
+def torso_forward(joints):
+    """The horizontal unit vector (3,) the torso of joints (15, 3) [m] faces: up × (right hip − left hip)."""
+    right = joints[JOINT_INDEX['right_hip']] - joints[JOINT_INDEX['left_hip']]
+    forward = np.cross([0.0, 0.0, 1.0], right)
+    forward[2] = 0.0
+    return forward / max(np.linalg.norm(forward), 1e-9)
+
+
+FOOT_REACH = 0.14   # [m] probe points this far ahead of and behind each ankle: on the shoe ahead, past the heel
+FOOT_DROP = 0.03    # [m] ... and this much lower (a foot on the floor is below its ankle)
+FOOT_CAP = 0.08     # [m] a probe's distance outside the silhouette counts up to this
+
+
+def foot_evidence(views, joints):
+    """[m] How much the views' silhouettes say that the feet point the way the torso of joints (15, 3) [m]
+    faces; negative: the other way. Feet point forward, and reach 15–20 cm ahead of the ankle but only
+    5–7 cm behind it, so a point FOOT_REACH ahead of an ankle falls on the shoe and one as far behind it
+    on the floor in any view that sees the foot from the side. Per view and ankle: the distance outside
+    the silhouette (View.outline) of the point behind minus that of the point ahead, each at most
+    FOOT_CAP and turned into metres at the ankle's depth. Views facing the foot see both points on it and
+    say nothing; neither do feet in the air, whose both points miss the silhouette. The ankles' labels do
+    not matter, so the cue holds while left and right are still unsorted. It is only as good as the
+    ankles: on the suite's truth poses it is right in 98-100 % of walking frames, on fitted ones far
+    less (ankles 10-20 cm off), hence FacingWatch's window. Beyond paper 000: silhouettes are otherwise
+    nearly the same from the front and from the back, and so is the fit's cost."""
+    forward = torso_forward(joints) * FOOT_REACH
+    evidence = 0.0
+    for view in views:
+        if view.outline is None:
+            continue
+        for name in ('left_ankle', 'right_ankle'):
+            probe = joints[JOINT_INDEX[name]] - (0.0, 0.0, FOOT_DROP)
+            pixels, depths = view.camera.project(np.array([probe + forward, probe - forward]))
+            if np.any(depths <= 0):
+                continue
+            metres = outside_distances(view.outline, pixels) * depths / view.camera.K[0, 0]
+            ahead, behind = np.minimum(metres, FOOT_CAP)
+            evidence += behind - ahead
+    return float(evidence)
+
+
+def mirrored_joints(joints):
+    """joints (15, 3) [m] with every left/right pair exchanged: the same points, the torso facing the
+    other way."""
+    mirrored = joints.copy()
+    for name in ('hip', 'knee', 'ankle', 'shoulder', 'elbow', 'wrist'):
+        pair = [JOINT_INDEX[f'left_{name}'], JOINT_INDEX[f'right_{name}']]
+        mirrored[pair] = joints[pair[::-1]]
+    return mirrored
+
+
+class FacingWatch:
+    """The feet's evidence (foot_evidence) about the fitted torso's facing over the last facing_window
+    fits: `wrong()` once their sum is below −facing_flip_evidence, i.e. the fit has faced backwards for a
+    while (a single frame's feet can mislead: a foot lifted, or the other foot's shoe behind the heel).
+    settings: FitterSettings."""
+
+    def __init__(self, settings):
+        self.settings = settings
+        self.evidence = []
+
+    def clear(self):
+        self.evidence.clear()
+
+    def append(self, evidence):
+        self.evidence = (self.evidence + [evidence])[-self.settings.facing_window:]
+
+    def wrong(self):
+        return sum(self.evidence) < -self.settings.facing_flip_evidence

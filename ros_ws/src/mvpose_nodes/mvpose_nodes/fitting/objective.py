@@ -221,6 +221,16 @@ def outline_cost(points, starts, ends, radii, terminal, scale, gate):
     return OUTLINE_STEP * float(np.sum(scale ** 2 * np.log1p((nearest / scale) ** 2)))
 
 
+def outside_distances(outline, points):
+    """Distances [px] (M,) of points (M, 2) [px] (x, y) outside one camera's Outline (0 inside the
+    silhouette): the map's value at the nearest pixel of its box plus the distance to the box."""
+    height, width = outline.outside.shape
+    local = np.asarray(points, float) - outline.origin
+    clamped = np.clip(local, 0, (width - 1, height - 1))
+    pixel = np.rint(clamped).astype(int)
+    return outline.outside[pixel[:, 1], pixel[:, 0]] + np.hypot(*(local - clamped).T)
+
+
 def inside_cost(starts, ends, outline):
     """The sum of squared distances [px²] to the silhouette of one camera's Outline of INSIDE_SAMPLES points
     along each segment (starts, ends (K, 2) [px])."""

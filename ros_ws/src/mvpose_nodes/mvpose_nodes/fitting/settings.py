@@ -51,9 +51,16 @@ class FitterSettings:
         12.0, '[px] a triangulation worse than this tries leaving one view out', 0.1, 1000.0)
     length_trust: float = setting(
         0.35, "measured bone lengths within this share of the template's are believed", 0.0, 1.0)
+    facing_evidence: float = setting(
+        0.03, "[m] the feet's evidence (limb_sides.foot_evidence) that decides which way a start faces; "
+              'below it, the faces the views see decide', 0.0, 10.0)
     face_evidence: float = setting(
         0.2, 'the summed (frontness − front skin fraction) towards the cameras needed to trust the face', 0.0, 10.0)
     # Left and right (fitting/limb_sides.py).
+    facing_window: int = setting(8, "fits over which the feet's evidence about the facing is summed", 1, 1000)
+    facing_flip_evidence: float = setting(
+        0.4, "[m] the fit is turned round when the feet's evidence over facing_window fits is below minus this",
+        0.0, 100.0)
     travel_yaw_limit_deg: float = setting(
         45.0, '[deg] a walking torso turned further than this from its direction of travel is turned back',
         0.0, 180.0)

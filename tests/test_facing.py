@@ -1,0 +1,101 @@
+"""Front or back from the feet (issue 13): limb_sides.foot_evidence on rendered silhouettes, and the
+fitter turning a backward fit round (limb_sides.FacingWatch) on a walk and on a turn on the spot, where
+the direction of travel cannot help. Keypoints are exact and the silhouettes the studio's true masks, so
+what is tested is the cue and the turning, not the features (those: the suite, test_commands.py)."""
+import math
+
+import numpy as np
+import pytest
+
+from mvpose_nodes.body.camera import studio_rig
+from mvpose_nodes.body.kinematics import inverse_kinematics
+from mvpose_nodes.body.model import JOINT_NAMES
+from mvpose_nodes.fitting.fitter import SkeletonFitter, View
+from mvpose_nodes.fitting.limb_sides import foot_evidence, mirrored_joints, torso_forward
+from mvpose_nodes.fitting.objective import outline_of
+from mvpose_nodes.fitting.settings import FitterSettings
+from mvpose_nodes.fitting.stage_search import KEYPOINT_JOINT
+from mvpose_nodes.studio import scene
+from mvpose_nodes.vision.contour import outer_contour
+
+pytestmark = pytest.mark.pure
+
+KEYPOINTS = ('root', 'neck', 'head', 'left_wrist', 'right_wrist', 'left_elbow', 'right_elbow', 'left_ankle',
+             'right_ankle', 'left_knee', 'right_knee')
+FRAMES = 20
+TURNED_AT = 3     # the fit is turned round after this frame
+WITHIN = 10       # ... and must face the right way again this many frames later
+
+
+def rendered_views(motion, cameras, frames):
+    """Per frame (truth (15, 3), [View]): exact keypoints and the outline of the true mask, 960×540."""
+    prepared = [scene.prepare_camera(camera) for camera in cameras]
+    found = []
+    for i in frames:
+        truth = motion.joints[i]
+        pose = scene.BodyPose(truth, motion.toes[i], motion.hand_tips[i], motion.head_forward[i])
+        views = []
+        for camera, view in zip(cameras, prepared):
+            pixels, _ = camera.project(truth)
+            keypoints = {n: (*pixels[JOINT_NAMES.index(KEYPOINT_JOINT.get(n, n))], 1.0) for n in KEYPOINTS}
+            outline = outline_of(outer_contour(scene.render(view, pose, scene.Appearance()).labels > 0))
+            views.append(View(camera, None, keypoints, outline=outline))
+        found.append((truth, views))
+    return found
+
+
+@pytest.fixture(scope='module')
+def walk(cmu_walk):
+    return rendered_views(cmu_walk.placed(heading=math.radians(30)), studio_rig((960, 540), cameras=[2, 5, 7]),
+                          range(FRAMES))
+
+
+@pytest.fixture(scope='module')
+def turn():
+    from mvpose_nodes.studio.catalogue import load_motion
+    motion = load_motion('turn_on_the_spot').placed()
+    return rendered_views(motion, studio_rig((960, 540), cameras=[1, 4, 6]), range(40, 40 + FRAMES))
+
+
+@pytest.mark.parametrize('frames', ['walk', 'turn'])
+def test_the_feet_say_which_way_the_true_pose_faces(frames, request):
+    """On the true poses the evidence is positive, and exactly the opposite for the mirrored pose (the
+    same points facing the other way); a view without an outline adds nothing."""
+    for truth, views in request.getfixturevalue(frames):
+        evidence = foot_evidence(views, truth)
+        assert evidence > 0.05, evidence
+        assert foot_evidence(views, mirrored_joints(truth)) == pytest.approx(-evidence)
+        assert foot_evidence(views + [View(views[0].camera, None, {})], truth) == evidence
+
+
+def facing_right(joints, truth):
+    return float(np.dot(torso_forward(joints), torso_forward(truth))) > 0
+
+
+def fit_turned_round(frames, settings):
+    """Fit the frames, turn the fit round (the same points, every pair the other way) after TURNED_AT;
+    whether each later fit faces the right way."""
+    fitter = SkeletonFitter(settings)
+    right = []
+    for i, (truth, views) in enumerate(frames):
+        fit = fitter.fit(i / 25.0, views)
+        if i == TURNED_AT:
+            assert facing_right(fit.joints, truth)
+            fitter.parameters = inverse_kinematics(mirrored_joints(fit.joints))
+            fitter.tracks.mirror()
+        elif i > TURNED_AT:
+            right.append(facing_right(fit.joints, truth))
+    return right
+
+
+@pytest.mark.parametrize('frames', ['walk', 'turn'])
+def test_a_fit_facing_backwards_is_turned_round_within_ten_frames(frames, request):
+    """A fit turned round mid-motion faces the right way again within WITHIN frames and stays so."""
+    right = fit_turned_round(request.getfixturevalue(frames), FitterSettings())
+    assert all(right[WITHIN:]), right
+
+
+def test_without_the_feet_a_turn_on_the_spot_stays_backwards(turn):
+    """The check above can fail: with the feet ignored, nothing turns a person who does not travel round."""
+    right = fit_turned_round(turn, FitterSettings(facing_flip_evidence=1e6))
+    assert not any(right[WITHIN:]), right
