@@ -144,3 +144,31 @@ def wait_for_graph(topics_with_both_ends, timeout=60):
         time.sleep(1.0)
     finally:
         node.destroy_node()
+
+
+FITTED_KEYPOINTS = ('root', 'neck', 'head', 'left_wrist', 'right_wrist', 'left_elbow', 'right_elbow', 'left_ankle',
+                    'right_ankle', 'left_knee', 'right_knee')
+
+
+def rendered_views(motion, cameras, frames):
+    """Per frame of `frames` (indices of motion, a studio BodyMotion): (truth joints (15, 3) [m], [fitter.View]),
+    each view with the keypoints projected from the truth and the outline of the studio's true mask."""
+    from mvpose_nodes.body.model import JOINT_NAMES
+    from mvpose_nodes.fitting.fitter import View
+    from mvpose_nodes.fitting.objective import outline_of
+    from mvpose_nodes.fitting.stage_search import KEYPOINT_JOINT
+    from mvpose_nodes.studio import scene
+    from mvpose_nodes.vision.contour import outer_contour
+    prepared = [scene.prepare_camera(camera) for camera in cameras]
+    found = []
+    for i in frames:
+        truth = motion.joints[i]
+        pose = scene.BodyPose(truth, motion.toes[i], motion.hand_tips[i], motion.head_forward[i])
+        views = []
+        for camera, view in zip(cameras, prepared):
+            pixels, _ = camera.project(truth)
+            keypoints = {n: (*pixels[JOINT_NAMES.index(KEYPOINT_JOINT.get(n, n))], 1.0) for n in FITTED_KEYPOINTS}
+            outline = outline_of(outer_contour(scene.render(view, pose, scene.Appearance()).labels > 0))
+            views.append(View(camera, None, keypoints, outline=outline))
+        found.append((truth, views))
+    return found

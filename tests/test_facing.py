@@ -9,39 +9,17 @@ import pytest
 
 from mvpose_nodes.body.camera import studio_rig
 from mvpose_nodes.body.kinematics import inverse_kinematics
-from mvpose_nodes.body.model import JOINT_NAMES
 from mvpose_nodes.fitting.fitter import SkeletonFitter, View
 from mvpose_nodes.fitting.limb_sides import foot_evidence, mirrored_joints, torso_forward
-from mvpose_nodes.fitting.objective import outline_of
 from mvpose_nodes.fitting.settings import FitterSettings
-from mvpose_nodes.fitting.stage_search import KEYPOINT_JOINT
-from mvpose_nodes.studio import scene
-from mvpose_nodes.vision.contour import outer_contour
+
+from common import rendered_views
 
 pytestmark = pytest.mark.pure
 
-KEYPOINTS = ('root', 'neck', 'head', 'left_wrist', 'right_wrist', 'left_elbow', 'right_elbow', 'left_ankle',
-             'right_ankle', 'left_knee', 'right_knee')
 FRAMES = 20
 TURNED_AT = 3     # the fit is turned round after this frame
 WITHIN = 10       # ... and must face the right way again this many frames later
-
-
-def rendered_views(motion, cameras, frames):
-    """Per frame (truth (15, 3), [View]): exact keypoints and the outline of the true mask, 960×540."""
-    prepared = [scene.prepare_camera(camera) for camera in cameras]
-    found = []
-    for i in frames:
-        truth = motion.joints[i]
-        pose = scene.BodyPose(truth, motion.toes[i], motion.hand_tips[i], motion.head_forward[i])
-        views = []
-        for camera, view in zip(cameras, prepared):
-            pixels, _ = camera.project(truth)
-            keypoints = {n: (*pixels[JOINT_NAMES.index(KEYPOINT_JOINT.get(n, n))], 1.0) for n in KEYPOINTS}
-            outline = outline_of(outer_contour(scene.render(view, pose, scene.Appearance()).labels > 0))
-            views.append(View(camera, None, keypoints, outline=outline))
-        found.append((truth, views))
-    return found
 
 
 @pytest.fixture(scope='module')

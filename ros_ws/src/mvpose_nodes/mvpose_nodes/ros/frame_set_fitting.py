@@ -4,8 +4,9 @@ features it computes itself, so the suite measures exactly what the node would p
 
 The status (Skeleton.STATUS_*): INITIALISING on a frame that (re)started the fit from the keypoints;
 DEGRADED when a configured camera gave nothing usable or a stage had no evidence; LOST when fewer than
-two cameras see the person (the joints repeat the last fitted pose; nothing before the first fit);
-OK otherwise.
+two cameras see the person (the joints repeat the last fitted pose; nothing before the first fit), or
+when the fit has lost the person (fitter.Fit.lost: the joints are that fit, and the next frame set
+re-initialises); OK otherwise.
 """
 from dataclasses import dataclass
 
@@ -62,9 +63,10 @@ class FrameSetFitter:
             return self.lost(stamp_ns, problems, 'fit', f'no fit at {stamp_ns} ns: {error}')
         used = {v.camera.number for v in views}
         degraded = bool(missing_cameras) or used != set(self.cameras) or not all(s.fitted for s in fit.stages)
-        status = (Skeleton.STATUS_INITIALISING if fit.initialised
+        status = (Skeleton.STATUS_LOST if fit.lost else Skeleton.STATUS_INITIALISING if fit.initialised
                   else Skeleton.STATUS_DEGRADED if degraded else Skeleton.STATUS_OK)
-        reason = f'cameras used: {sorted(used)}' if degraded else ''
+        reason = (f'lost: the fit leaves {100 * fit.lost:.0f} % of the outline unexplained; re-initialising'
+                  if fit.lost else f'cameras used: {sorted(used)}' if degraded else '')
         message = skeleton_message(fit.joints, stamp_ns, parameter_names=list(PARAMETER_NAMES),
                                    parameters=fit.parameters.tolist(), stages=stage_messages(fit.stages),
                                    status=status, status_message=reason, fit_time=fit.seconds)
