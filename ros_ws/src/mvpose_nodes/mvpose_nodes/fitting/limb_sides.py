@@ -4,7 +4,9 @@ A single view often cannot tell left from right (vision/features.py), and paper 
 to. The triangulated pairs are labelled by LimbTracks (continuity, and the direction of travel while
 walking); each camera's left/right labels of legs and arms are then swapped where the labelled pose
 projects better onto the swapped ones (oriented_view); and a walking torso that faces away from its
-direction of travel is turned back (facing_travel). Beyond the paper; measured in docs/method.md.
+direction of travel is turned back (facing_travel). Front or back, i.e. every pair at once: the faces
+the views see (face_votes) and the feet (foot_evidence, FacingWatch). Beyond the paper; measured in
+docs/method.md.
 """
 from dataclasses import replace
 
