@@ -152,7 +152,8 @@ FITTED_KEYPOINTS = ('root', 'neck', 'head', 'left_wrist', 'right_wrist', 'left_e
 
 def rendered_views(motion, cameras, frames):
     """Per frame of `frames` (indices of motion, a studio BodyMotion): (truth joints (15, 3) [m], [fitter.View]),
-    each view with the keypoints projected from the truth and the outline of the studio's true mask."""
+    each view with the keypoints projected from the truth (those inside the image) and the outline of the
+    studio's true mask."""
     from mvpose_nodes.body.model import JOINT_NAMES
     from mvpose_nodes.fitting.fitter import View
     from mvpose_nodes.fitting.objective import outline_of
@@ -168,6 +169,8 @@ def rendered_views(motion, cameras, frames):
         for camera, view in zip(cameras, prepared):
             pixels, _ = camera.project(truth)
             keypoints = {n: (*pixels[JOINT_NAMES.index(KEYPOINT_JOINT.get(n, n))], 1.0) for n in FITTED_KEYPOINTS}
+            keypoints = {n: k for n, k in keypoints.items()   # as the features: none outside the image
+                         if 0 <= k[0] < camera.width and 0 <= k[1] < camera.height}
             outline = outline_of(outer_contour(scene.render(view, pose, scene.Appearance()).labels > 0))
             views.append(View(camera, None, keypoints, outline=outline))
         found.append((truth, views))

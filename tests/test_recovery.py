@@ -14,14 +14,15 @@ from common import rendered_views
 pytestmark = pytest.mark.pure
 
 KNOCKED_AT = 4           # before this frame the fitter's pose is moved KNOCK [m] away from the person
-KNOCK = (0.8, 0.0, 0.0)
+KNOCK = (1.5, 0.0, 0.0)
 FRAMES = 12
+MID_WALK = 28            # the clip's middle frames: the whole person in every view
 
 
 @pytest.fixture(scope='module')
 def walk(cmu_walk):
     return rendered_views(cmu_walk.placed(heading=math.radians(-20)), studio_rig((960, 540), cameras=[3, 5, 7]),
-                          range(FRAMES))
+                          range(MID_WALK, MID_WALK + FRAMES))
 
 
 def knocked_fits(frames, settings):
