@@ -18,7 +18,8 @@ from mvpose_nodes.vision.features import FRONT_SKIN_FRACTION
 PAIRED_LIMBS = ('knee', 'ankle', 'elbow', 'wrist')   # keypoints that come as a left/right pair
 TEMPLATE_HEIGHT = 1.75   # [m] the stature at which ankle_height was measured on the template
 # A pair's views are re-paired without one view only when that view's observations lie this many outlier_rms
-# from the others' pair on average: re-pairing rough knee and ankle keypoints (20-40 px) swapped legs (demo 31 -> 50 mm).
+# from the others' pair on average: without it, rough knee and ankle keypoints (90th percentile 34-66 px on the
+# demo bag, `./mvpose features eval`) were re-paired and legs swapped (demo 31 -> 50 mm).
 PAIRING_OUTLIER_FACTOR = 4
 
 
