@@ -17,10 +17,6 @@ from mvpose_nodes.vision.features import FRONT_SKIN_FRACTION
 
 PAIRED_LIMBS = ('knee', 'ankle', 'elbow', 'wrist')   # keypoints that come as a left/right pair
 TEMPLATE_HEIGHT = 1.75   # [m] the stature at which ankle_height was measured on the template
-# A pair's views are re-paired without one view only when that view's observations lie this many outlier_rms
-# from the others' pair on average: without it, rough knee and ankle keypoints (90th percentile 34-66 px on the
-# demo bag, `./mvpose features eval`) were re-paired and legs swapped (demo 31 -> 50 mm).
-PAIRING_OUTLIER_FACTOR = 4
 
 
 def robust_triangulate(cameras, pixels, weights, outlier_rms):
@@ -67,67 +63,18 @@ def triangulated_joints(views, settings):
     for limb in PAIRED_LIMBS:
         left_pixels, right_pixels = pixels(f'left_{limb}'), pixels(f'right_{limb}')
         pair_weights = np.column_stack([weights(f'left_{limb}'), weights(f'right_{limb}')])
-        swaps = paired_views(cameras, left_pixels, right_pixels, pair_weights, settings.outlier_rms)
-        if swaps is None:
+        pair = best_assignment(cameras, left_pixels, right_pixels, pair_weights)
+        if pair is None:
             continue
+        swaps = pair[2]
+        observed = np.where(swaps[:, None], right_pixels, left_pixels), np.where(swaps[:, None], left_pixels, right_pixels)
+        observed_weights = np.where(swaps, pair_weights[:, 1], pair_weights[:, 0]), np.where(swaps, pair_weights[:, 0], pair_weights[:, 1])
         left, right_point = (robust_triangulate(cameras, p, w, settings.outlier_rms)
-                             for p, w in zip(*_exchanged(swaps, left_pixels, right_pixels, pair_weights)))
+                             for p, w in zip(observed, observed_weights))
         if left is None or right_point is None:
             continue
         joints[f'left_{limb}'], joints[f'right_{limb}'] = left, right_point
     return joints
-
-
-def _exchanged(swaps, left_pixels, right_pixels, pair_weights):
-    """((left, right) pixels (V, 2) each, (left, right) weights (V,) each) with the views in `swaps` (V,)
-    bool exchanged."""
-    column = swaps[:, None]
-    return ((np.where(column, right_pixels, left_pixels), np.where(column, left_pixels, right_pixels)),
-            (np.where(swaps, pair_weights[:, 1], pair_weights[:, 0]), np.where(swaps, pair_weights[:, 0], pair_weights[:, 1])))
-
-
-def _pair_rms(cameras, swaps, left_pixels, right_pixels, pair_weights):
-    """The larger of the two points' RMS reprojection errors [px] with the views paired as in swaps."""
-    found = [triangulate(cameras, p, w) for p, w in zip(*_exchanged(swaps, left_pixels, right_pixels, pair_weights))]
-    return max(f[1] for f in found) if all(f is not None for f in found) else np.inf
-
-
-def paired_views(cameras, left_pixels, right_pixels, pair_weights, outlier_rms):
-    """Which views' labels of a left/right pair to exchange so that they agree (swaps (V,) bool), or None:
-    triangulation.best_assignment, robust to one view that is off both points. With three or more views
-    and the pairing reprojecting worse than outlier_rms [px], each view is left out in turn; the pairing of
-    the others that reprojects best is kept (if under outlier_rms) when the left-out view's observations
-    lie PAIRING_OUTLIER_FACTOR · outlier_rms or more from its points on average, and the left-out view
-    then takes the labels its observations lie nearer to. One view's wrong elbows otherwise chose how the
-    good views paired up: both elbows 0.4-0.6 m off (issue 13, one camera's arm keypoints 200 px off)."""
-    pair = best_assignment(cameras, left_pixels, right_pixels, pair_weights)
-    if pair is None:
-        return None
-    usable = np.flatnonzero(np.all(np.isfinite(left_pixels), axis=1) & np.all(np.isfinite(right_pixels), axis=1)
-                            & np.all(pair_weights > 0, axis=1))
-    if len(usable) < 3 or _pair_rms(cameras, pair[2], left_pixels, right_pixels, pair_weights) <= outlier_rms:
-        return pair[2]
-    best = None
-    for left_out in usable:
-        reduced = pair_weights.copy()
-        reduced[left_out] = 0.0
-        trial = best_assignment(cameras, left_pixels, right_pixels, reduced)
-        if trial is None:
-            continue
-        rms = _pair_rms(cameras, trial[2], left_pixels, right_pixels, reduced)
-        if best is None or rms < best[0]:
-            best = (rms, left_out, trial)
-    if best is None or best[0] > outlier_rms:
-        return pair[2]
-    _, left_out, (left, right, swaps) = best
-    (left_pixel, right_pixel), _ = cameras[left_out].project(np.array([left, right]))
-    straight = np.hypot(*(left_pixels[left_out] - left_pixel)) + np.hypot(*(right_pixels[left_out] - right_pixel))
-    crossed = np.hypot(*(left_pixels[left_out] - right_pixel)) + np.hypot(*(right_pixels[left_out] - left_pixel))
-    if min(straight, crossed) / 2 < PAIRING_OUTLIER_FACTOR * outlier_rms:
-        return pair[2]   # the left-out view is not off the pair: the keypoints are just rough
-    swaps = swaps.copy()
-    swaps[left_out] = crossed < straight
-    return swaps
 
 
 def facing_right(views, joints, face_evidence):
