@@ -107,22 +107,32 @@ def main(argv=None, prog='eval suite'):
 @dataclass
 class CaseResult:
     case: object
-    errors: np.ndarray            # (F, 15) [mm] per joint; NaN rows where no skeleton came
     statuses: list                # Skeleton.status per frame set, None where no skeleton came
     fit_seconds: list
     joints: np.ndarray            # (F, 15, 3) [m] fitted, NaN where none
     truth: np.ndarray             # (F, 15, 3) [m]
-    swapped: np.ndarray           # (F,) bool: a left/right pair nearer the other side's truth
+
+    @property
+    def errors(self):
+        """(F, 15) [mm] per joint; NaN rows where no skeleton came."""
+        from mvpose_nodes.app.reports.accuracy import joint_errors_mm
+        return joint_errors_mm(self.joints, self.truth)
+
+    @property
+    def swapped(self):
+        """(F,) bool: a left/right pair nearer the other side's truth."""
+        from mvpose_nodes.app.reports.accuracy import swapped_pairs
+        return swapped_pairs(self.joints, self.truth).any(axis=1)
 
     @property
     def mean_error(self):
-        return float(np.nanmean(self.errors)) if np.isfinite(self.errors).any() else math.inf
+        errors = self.errors
+        return float(np.nanmean(errors)) if np.isfinite(errors).any() else math.inf
 
     @property
     def per_frame(self):
         """(F,) [mm] the mean joint error of each frame set, NaN where no skeleton came."""
-        fitted = np.isfinite(self.errors).all(axis=1)
-        return np.where(fitted, np.where(fitted[:, None], self.errors, 0.0).mean(axis=1), np.nan)
+        return self.errors.mean(axis=1)
 
 
 def case_motion(case):
@@ -163,7 +173,6 @@ def render_camera(case, view, motion, index):
 def run_case(case):
     """Render, extract and fit every frame set of a case; its CaseResult."""
     from std_msgs.msg import Header
-    from mvpose_nodes.app.reports.accuracy import joint_errors_mm, swapped_pairs
     from mvpose_nodes.fitting.settings import FitterSettings
     from mvpose_nodes.ros.camera_bag import frame_stamp_ns
     from mvpose_nodes.ros.conversions import feature_messages, joints_from_skeleton, optical_frame, set_stamp
@@ -196,9 +205,7 @@ def run_case(case):
             joints[index] = joints_from_skeleton(result.message)
             statuses[index] = result.message.status
             seconds.append(result.message.fit_time)
-    truth = motion.joints
-    return CaseResult(case, joint_errors_mm(joints, truth), statuses, seconds, joints, truth,
-                      swapped_pairs(joints, truth).any(axis=1))
+    return CaseResult(case, statuses, seconds, joints, motion.joints)
 
 
 def report(results):

@@ -18,18 +18,16 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from mvpose_nodes.body.kinematics import forward_kinematics, inverse_kinematics
-from mvpose_nodes.body.model import BONES, JOINT_INDEX, STAGE_NAMES
+from mvpose_nodes.body.model import JOINT_INDEX, STAGE_NAMES
 from mvpose_nodes.fitting.initialisation import (PAIRED_LIMBS, completed_joints, labelled_joints, person_lengths,
                                                  triangulated_joints)
 from mvpose_nodes.fitting.limb_sides import (FacingWatch, LimbTracks, exchange, face_votes, facing_travel,
                                              foot_evidence, mirrored_joints, oriented_view)
 from mvpose_nodes.fitting.objective import boundary_distances, capsule_residuals, outline_of
 from mvpose_nodes.fitting.settings import FitterSettings
-from mvpose_nodes.fitting.stage_search import StageSearch, stage_indices
+from mvpose_nodes.fitting.stage_search import CAPSULE_ENDS, StageSearch, stage_indices
 
 TORSO_POSITION = stage_indices('torso')[:3]   # torso_x, torso_y, torso_z: the root's position [m]
-BONE_STARTS = [JOINT_INDEX[start] for start, _ in BONES]
-BONE_ENDS = [JOINT_INDEX[end] for _, end in BONES]
 LOST_MARGIN = 0.25  # [m] an outline point this far from every bone is not explained by the skeleton
 
 
@@ -106,17 +104,17 @@ class SkeletonFitter:
         if found is not None:
             self.tracks.label(stamp, found)
         parameters, results = self.search_stages(parameters, views, found)
-        self.facing.append(foot_evidence(views, forward_kinematics(parameters, self.lengths)[0]))
+        joints, _ = forward_kinematics(parameters, self.lengths)
+        self.facing.append(foot_evidence(views, joints))
         if self.facing.wrong():  # turn round: the same points, every pair the other way
-            mirrored = mirrored_joints(forward_kinematics(parameters, self.lengths)[0])
             for limb in PAIRED_LIMBS:
                 exchange(found or {}, limb)
             self.tracks.mirror()
             self.facing.clear()
             self.flips += 1
-            parameters, results = self.search_stages(inverse_kinematics(mirrored), views, found)
+            parameters, results = self.search_stages(inverse_kinematics(mirrored_joints(joints)), views, found)
+            joints, _ = forward_kinematics(parameters, self.lengths)
         self.parameters = parameters
-        joints, _ = forward_kinematics(parameters, self.lengths)
         self.tracks.append(stamp, joints)
         unexplained = unexplained_share(views, joints)
         self.lost_fits = self.lost_fits + 1 if unexplained > settings.lost_share else 0
@@ -190,8 +188,8 @@ def unexplained_share(views, joints):
         if view.outline is None or not len(view.outline.points):
             continue
         pixels, depths = view.camera.project(joints)
-        residuals = capsule_residuals(view.outline.points, pixels[BONE_STARTS], pixels[BONE_ENDS],
-                                      np.zeros(len(BONES)), np.zeros(len(BONES), bool))
+        residuals = capsule_residuals(view.outline.points, pixels[CAPSULE_ENDS[:, 0]], pixels[CAPSULE_ENDS[:, 1]],
+                                      np.zeros(len(CAPSULE_ENDS)), np.zeros(len(CAPSULE_ENDS), bool))
         metres = residuals.min(axis=1) * depths[JOINT_INDEX['pelvis']] / view.camera.K[0, 0]
         shares.append(float(np.mean(metres > LOST_MARGIN)))
     return float(np.median(shares)) if shares else 0.0
