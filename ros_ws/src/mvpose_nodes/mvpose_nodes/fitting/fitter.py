@@ -19,6 +19,7 @@ import numpy as np
 
 from mvpose_nodes.body.kinematics import forward_kinematics, inverse_kinematics
 from mvpose_nodes.body.model import JOINT_INDEX, STAGE_NAMES
+from mvpose_nodes.fitting.compiled import pack_frame
 from mvpose_nodes.fitting.initialisation import (PAIRED_LIMBS, completed_joints, labelled_joints, person_lengths,
                                                  triangulated_joints)
 from mvpose_nodes.fitting.limb_sides import (FacingWatch, LimbTracks, exchange, face_votes, facing_travel,
@@ -131,6 +132,7 @@ class SkeletonFitter:
                 reference[JOINT_INDEX[name]] = position
         candidate = None
         oriented = [oriented_view(view, reference) for view in views]
+        frame = pack_frame(oriented)
         results = []
         for stage in STAGE_NAMES:
             if found is not None and stage != 'torso' and candidate is None:
@@ -145,10 +147,10 @@ class SkeletonFitter:
                 indices = stage_indices(stage)
                 alternative = parameters.copy()
                 alternative[indices] = candidate[indices]
-                if (self.stages.stage_cost(stage, alternative, oriented, assigned)[0]
-                        < self.stages.stage_cost(stage, parameters, oriented, assigned)[0]):
+                if (self.stages.compiled_cost(stage, alternative, oriented, assigned, frame)[0]
+                        < self.stages.compiled_cost(stage, parameters, oriented, assigned, frame)[0]):
                     parameters = alternative
-            parameters, result = self.stages.search(stage, parameters, oriented, assigned)
+            parameters, result = self.stages.search(stage, parameters, oriented, assigned, frame)
             results.append(result)
         return parameters, results
 

@@ -23,6 +23,7 @@ from mvpose_nodes.vision.contour import SIDE_A, SIDE_B
 
 SEGMENT_POINTS = 100  # N of Eq. 4
 MAP_MARGIN_PX = 50    # the maps reach this far beyond the contour, so fitted segments rarely leave them
+BILINEAR_STEPS = 32   # map look-ups resolve 1/32 px, as cv2.remap (INTER_BITS = 5)
 
 
 @dataclass(frozen=True)
@@ -67,16 +68,31 @@ class BoundaryDistances:
         return both[:, 0], both[:, 1]
 
     def _interpolate(self, distance_map, points):
-        """Bilinear look-up of an (H, W) or (H, W, K) float32 map at points (M, 2), plus the distance
-        outside the box. cv2.remap does the look-up (its bilinear weights are quantised to 1/32 px,
-        far below what the fit resolves) in a fifth of the time numpy's gathers took."""
-        height, width = distance_map.shape[:2]
-        local = np.asarray(points, dtype=float) - self.origin
-        clamped = np.clip(local, 0, (width - 1, height - 1))
-        outside = np.hypot(*(local - clamped).T)
-        values = cv2.remap(distance_map, clamped.astype(np.float32)[None], None, cv2.INTER_LINEAR,
-                           borderMode=cv2.BORDER_REPLICATE)[0]
-        return values + (outside[:, None] if distance_map.ndim == 3 else outside)
+        """bilinear() of an (H, W) or (H, W, K) float32 map at points (M, 2) relative to the box's origin."""
+        return bilinear(distance_map, np.asarray(points, dtype=float) - self.origin)
+
+
+def bilinear(distance_map, local):
+    """Bilinear look-up of an (H, W) or (H, W, K) float32 map at points (M, 2) [px] (x, y) in the map's own
+    pixels, in float64, with OpenCV's remap weights: positions rounded to 1/BILINEAR_STEPS px (far below
+    what the fit resolves; the fitter was measured with cv2.remap, and the objective is kept as it was). A
+    point outside the map gets the value at the nearest map point plus its distance to the map. Returns
+    (M,) or (M, K). compiled._bilinear does the same per point."""
+    height, width = distance_map.shape[:2]
+    clamped = np.clip(local, 0, (width - 1, height - 1))
+    outside = np.hypot(*(local - clamped).T)
+    steps = np.rint(clamped * BILINEAR_STEPS).astype(int)
+    low = steps // BILINEAR_STEPS
+    high = np.minimum(low + 1, (width - 1, height - 1))
+    fraction = (steps % BILINEAR_STEPS) / BILINEAR_STEPS
+    fx, fy = fraction[:, 0], fraction[:, 1]
+    if distance_map.ndim == 3:
+        fx, fy, outside = fx[:, None], fy[:, None], outside[:, None]
+    v00, v01 = (distance_map[low[:, 1], x].astype(float) for x in (low[:, 0], high[:, 0]))
+    v10, v11 = (distance_map[high[:, 1], x].astype(float) for x in (low[:, 0], high[:, 0]))
+    top = v00 + fx * (v01 - v00)
+    bottom = v10 + fx * (v11 - v10)
+    return top + fy * (bottom - top) + outside
 
 
 def boundary_distances(contour_labels, image_size, labels=None, margin=MAP_MARGIN_PX):
@@ -237,4 +253,4 @@ def inside_cost(starts, ends, outline):
     samples = (starts[:, None] + _fractions(INSIDE_SAMPLES)[None] * (ends - starts)[:, None]).reshape(-1, 2)
     height, width = outline.outside.shape
     samples = np.clip(np.rint(samples - outline.origin), 0, (width - 1, height - 1)).astype(int)
-    return float(np.sum(outline.outside[samples[:, 1], samples[:, 0]] ** 2))
+    return float(np.sum(outline.outside[samples[:, 1], samples[:, 0]].astype(float) ** 2))

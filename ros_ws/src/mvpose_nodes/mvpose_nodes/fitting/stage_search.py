@@ -16,16 +16,18 @@ own parameters with the rest fixed, minimising its own objective (weights: setti
     keypoints are evidence too, as in paper 000 Sec. 3.2);
   - priors: smoothness towards the stage's start (25 fps) and joint limits.
 Nelder–Mead (Lagarias et al. 1998): SciPy's with its standard coefficients, which are the paper's
-(Eq. 7: ρ = 1, χ = 2, γ = 0.5, σ = 0.5; non-adaptive), stopped by the simplex size (xatol) alone.
+(Eq. 7: ρ = 1, χ = 2, γ = 0.5, σ = 0.5; non-adaptive), stopped by the simplex size (xatol) alone;
+compiled, with the objective, in compiled.py (this module's stage_cost is the objective's reference).
 """
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import minimize
 
 from mvpose_nodes.body.kinematics import BONE_INDEX, BONES, forward_kinematics
 from mvpose_nodes.body.model import (JOINT_INDEX, LABEL_HEAD, LABEL_LEFT_LEG, LABEL_RIGHT_LEG, LABEL_TORSO,
                                      PARAMETER_INDEX)
+from mvpose_nodes.fitting.compiled import (LABEL_SLOT, StagePack, bone_length_array, fractions_arrays, nelder_mead,
+                                           stage_objective)
 from mvpose_nodes.fitting.objective import (CAPSULE_RADII, TERMINAL_BONES, capsule_residuals, inside_cost, limb_cost,
                                             outline_cost)
 
@@ -67,6 +69,7 @@ STAGE_CAPSULES = {  # bones whose capsules explain the outline in each stage (ob
 CAPSULE_ENDS = np.array([(JOINT_INDEX[bone.parent_joint], JOINT_INDEX[bone.joint]) for bone in BONES])  # (14, 2)
 CAPSULE_RADIUS = np.array([CAPSULE_RADII[bone.name.replace('left_', '').replace('right_', '')] for bone in BONES])
 CAPSULE_TERMINAL = np.array([bone.name.endswith(TERMINAL_BONES) for bone in BONES])
+FRACTIONS, SAMPLES = fractions_arrays()
 STAGE_CAPSULE_INDEX = {stage: np.array([BONE_INDEX[name] for name in names]) for stage, names in STAGE_CAPSULES.items()}
 
 
@@ -108,41 +111,70 @@ class StageSearch:
     def __init__(self, settings, lengths):
         self.settings = settings
         self.lengths = lengths
+        self.bone_lengths = bone_length_array(lengths)
         self._targets = {}
 
     def new_frame(self):
         self._targets = {}
 
-    def search(self, stage, parameters, views, assigned):
+    def search(self, stage, parameters, views, assigned, frame):
         """One Nelder–Mead stage over STAGE_PARAMETERS[stage]; (new parameters, StageResult). assigned:
-        per view the outline points the stage explains (outline_assignment)."""
+        per view the outline points the stage explains (outline_assignment); frame: the views'
+        compiled.FramePack. The search is compiled.nelder_mead (SciPy's, step for step) and each
+        evaluation compiled.stage_objective: stage_cost plus the priors."""
         settings = self.settings
-        indices = stage_indices(stage)
-        steps = np.array([settings.step_position if name.endswith(('_x', '_y', '_z')) else settings.step_angle
-                          for name in STAGE_PARAMETERS[stage]])
         if not has_evidence(stage, views, assigned):
             return parameters, StageResult(stage, 0.0, 0, [], False)
-        trial = parameters.copy()
+        indices = stage_indices(stage)
+        pack = self.stage_pack(stage, parameters, views, assigned, priors=True)
         start = parameters[indices]
-        limits = [(i, JOINT_LIMITS[name]) for i, name in enumerate(STAGE_PARAMETERS[stage]) if name in JOINT_LIMITS]
-
-        def cost(values):
-            trial[indices] = values
-            total, _ = self.stage_cost(stage, trial, views, assigned)
-            # Priors: the pose changes little between frames at 25 fps, and joints have limits.
-            total += settings.smoothness_weight * np.sum(((values - start) / steps) ** 2)
-            for i, (low, high) in limits:
-                total += settings.limit_weight * (max(low - values[i], 0.0) + max(values[i] - high, 0.0)) ** 2
-            return total
-        simplex = np.vstack([start, start + np.diag(steps)])
-        result = minimize(cost, start, method='Nelder-Mead', options={
-            'initial_simplex': simplex, 'xatol': settings.simplex_tolerance, 'fatol': np.inf, 'adaptive': False,
-            'maxfev': settings.max_evaluations_per_parameter * len(indices)})
+        found, _, evaluations = nelder_mead(
+            np.vstack([start, start + np.diag(pack.steps)]), settings.simplex_tolerance, np.inf,
+            settings.max_evaluations_per_parameter * len(indices), pack, frame, self.bone_lengths, FRACTIONS, SAMPLES,
+            np.zeros(len(views), np.bool_))
         fitted = parameters.copy()
-        fitted[indices] = result.x
-        final, used = self.stage_cost(stage, fitted, views, assigned)
-        return fitted, StageResult(stage, float(final), int(result.nfev),
-                                   sorted(views[i].camera.number for i in used), True)
+        fitted[indices] = found
+        final, used = self.compiled_cost(stage, fitted, views, assigned, frame)
+        return fitted, StageResult(stage, final, int(evaluations), sorted(views[i].camera.number for i in used), True)
+
+    def compiled_cost(self, stage, parameters, views, assigned, frame):
+        """stage_cost (without the priors) by the compiled objective: (cost, indices of the views that
+        contributed)."""
+        pack = self.stage_pack(stage, parameters, views, assigned, priors=False)
+        used = np.zeros(len(views), np.bool_)
+        cost = stage_objective(parameters[pack.indices], pack, frame, self.bone_lengths, FRACTIONS, SAMPLES, used)
+        return float(cost), np.flatnonzero(used).tolist()
+
+    def stage_pack(self, stage, parameters, views, assigned, priors):
+        """The compiled.StagePack of the stage's search from `parameters` (29,) (the start, and the values
+        of the parameters it does not search); priors=False leaves the smoothness and limits out."""
+        settings = self.settings
+        names = STAGE_PARAMETERS[stage]
+        indices = np.array(stage_indices(stage), np.int64)
+        steps = np.array([settings.step_position if name.endswith(('_x', '_y', '_z')) else settings.step_angle
+                          for name in names])
+        limits = np.array([JOINT_LIMITS.get(name, (-np.inf, np.inf)) for name in names], float)
+        mine = STAGE_CAPSULE_INDEX[stage]
+        assigned = [None] * len(views) if assigned is None else assigned
+        points = [a for a in assigned if a is not None and len(a)]
+        targets = self.keypoint_targets(stage, views)
+        bones = STAGE_BONES[stage]
+        return StagePack(
+            indices, np.asarray(parameters, float).copy(), np.asarray(parameters, float)[indices].copy(), steps,
+            limits[:, 0].copy(), limits[:, 1].copy(), mine.astype(np.int64), CAPSULE_RADIUS[mine],
+            CAPSULE_TERMINAL[mine], np.array([a is not None for a in assigned], np.bool_),
+            np.concatenate(points).astype(float) if points else np.zeros((0, 2)),
+            np.concatenate([np.full(len(a), i) for i, a in enumerate(assigned) if a is not None and len(a)]).astype(np.int64)
+            if points else np.zeros(0, np.int64),
+            np.array([BONE_INDEX[name] for name, _ in bones], np.int64),
+            np.array([LABEL_SLOT[label] for _, label in bones], np.int64),
+            np.array([i for i, joints, _, _ in targets for _ in joints], np.int64),
+            np.array([j for _, joints, _, _ in targets for j in joints], np.int64),
+            np.concatenate([xy for _, _, xy, _ in targets]) if targets else np.zeros((0, 2)),
+            np.concatenate([c for _, _, _, c in targets]) if targets else np.zeros(0),
+            np.array([settings.enclosure_weight, settings.outline_weight, settings.inside_weight, settings.outline_scale,
+                      settings.outline_gate, settings.boundary_weight, settings.keypoint_weight, settings.keypoint_scale,
+                      settings.smoothness_weight if priors else 0.0, settings.limit_weight if priors else 0.0]))
 
     def outline_assignment(self, stage, parameters, views):
         """Per view, the outline points (M, 2) [px] that the stage's capsules explain in the pose

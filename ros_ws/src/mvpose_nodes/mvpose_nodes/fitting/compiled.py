@@ -1,0 +1,401 @@
+"""The stage objective and forward kinematics compiled with numba: what the Nelder–Mead searches evaluate.
+
+StageSearch.stage_cost (stage_search.py, with objective.py) is the readable numpy reference of a
+stage's objective; `stage_objective` here computes the same number in one compiled call, which equals
+the reference to 1e-9 (relative; tests/test_compiled.py on random poses). A search evaluates the
+objective 50–150 times per stage; in numpy most of each evaluation's ~300 µs was the interpreter's
+overhead of some hundred small array operations, compiled it is a few µs.
+
+The frame's evidence is packed once per frame (`pack_frame`: cameras, silhouette maps and boundary
+maps, flattened into one buffer each) and a stage's once per search (`pack_stage`: its outline points,
+keypoint targets, bones, priors), so an evaluation passes only the trial values. Compiled functions are
+cached on disk (numba's cache=True; ./mvpose sets NUMBA_CACHE_DIR to .venv/numba-cache), so only the
+first run on a machine compiles (about 10 s); `warm_up()` does that at a node's start, not in its first fit.
+Units and axes as in objective.py: pixels x right, y down; metres; radians.
+"""
+from typing import NamedTuple
+
+import numpy as np
+from numba import njit
+
+from mvpose_nodes.body.kinematics import BONES, LENGTH_FRACTIONS, _ANGLE_INDEX, _CHAIN, _TORSO_POSITION
+from mvpose_nodes.body.model import JOINT_INDEX, JOINT_NAMES, LABEL_HEAD, LABEL_LEFT_LEG, LABEL_RIGHT_LEG, LABEL_TORSO
+from mvpose_nodes.fitting.objective import BILINEAR_STEPS, INSIDE_SAMPLES, OUTLINE_STEP, SEGMENT_POINTS, _fractions
+from mvpose_nodes.vision.contour import SIDE_A, SIDE_B
+
+MAP_LABELS = (LABEL_TORSO, LABEL_HEAD, LABEL_LEFT_LEG, LABEL_RIGHT_LEG)  # the parts with labelled bones
+LABEL_SLOT = {label: slot for slot, label in enumerate(MAP_LABELS)}
+
+# Forward kinematics' plan as arrays (kinematics._CHAIN): per bone its parent bone (−1: world), whether it
+# has angles, rest direction, length key's index, start and end joints, and its angles' parameter indices.
+_LENGTH_KEYS = tuple(LENGTH_FRACTIONS)
+CHAIN_PARENT = np.array([parent for parent, *_ in _CHAIN], np.int64)
+CHAIN_HAS_ANGLES = np.array([has_angles for _, has_angles, *_ in _CHAIN], np.bool_)
+CHAIN_REST = np.array([rest for _, _, rest, *_ in _CHAIN], np.float64)
+CHAIN_START = np.array([start for *_, start, _ in _CHAIN], np.int64)
+CHAIN_END = np.array([end for *_, end in _CHAIN], np.int64)
+CHAIN_ANGLES = np.asarray(_ANGLE_INDEX, np.int64)
+PELVIS = JOINT_INDEX['pelvis']
+TORSO_POSITION = np.array(_TORSO_POSITION, np.int64)
+
+
+def bone_length_array(lengths):
+    """Per bone in BONES order its length [m] (14,) float64, from lengths {length key: m}."""
+    return np.array([lengths[bone.length] for bone in BONES], np.float64)
+
+
+@njit(cache=True, error_model='numpy')
+def _euler(rx, ry, rz):
+    """kinematics.euler_matrix: Rz(rz)·Ry(ry)·Rx(rx) (paper 004 Eq. 2), 3×3."""
+    cx, sx, cy, sy, cz, sz = np.cos(rx), np.sin(rx), np.cos(ry), np.sin(ry), np.cos(rz), np.sin(rz)
+    out = np.empty((3, 3))
+    out[0, 0], out[0, 1], out[0, 2] = cz * cy, cz * sy * sx - sz * cx, cz * sy * cx + sz * sx
+    out[1, 0], out[1, 1], out[1, 2] = sz * cy, sz * sy * sx + cz * cx, sz * sy * cx - cz * sx
+    out[2, 0], out[2, 1], out[2, 2] = -sy, cy * sx, cy * cx
+    return out
+
+
+@njit(cache=True, error_model='numpy')
+def forward_joints(parameters, bone_lengths):
+    """Joints (15, 3) [m] of 29 parameters (Table 1 order) and bone lengths (14,) [m]: the joints of
+    kinematics.forward_kinematics (without its bone frames)."""
+    joints = np.zeros((len(CHAIN_END) + 1, 3))
+    joints[PELVIS] = parameters[TORSO_POSITION]
+    frames = np.empty((len(CHAIN_END), 3, 3))
+    for bone in range(len(CHAIN_END)):
+        frame = np.eye(3) if CHAIN_PARENT[bone] < 0 else frames[CHAIN_PARENT[bone]].copy()
+        if CHAIN_HAS_ANGLES[bone]:
+            angles = np.zeros(3)
+            for axis in range(3):
+                if CHAIN_ANGLES[bone, axis] >= 0:
+                    angles[axis] = parameters[CHAIN_ANGLES[bone, axis]]
+            frame = frame @ _euler(angles[0], angles[1], angles[2])
+        frames[bone] = frame
+        joints[CHAIN_END[bone]] = joints[CHAIN_START[bone]] + bone_lengths[bone] * (frame @ CHAIN_REST[bone])
+    return joints
+
+
+class FramePack(NamedTuple):
+    """One frame's views as arrays (V views, in the order of the fitter's view list).
+
+    K, R: (V, 3, 3); t: (V, 3); D: (V, 5) plumb_bob (body.camera.Camera). Silhouette maps
+    (objective.Outline.outside): has_outline (V,) bool, outside (total,) float32 all maps flattened,
+    outside_at (V,) offset, outside_shape (V, 2) (height, width), outside_origin (V, 2) (x0, y0) [px].
+    Boundary maps (objective.BoundaryDistances) of MAP_LABELS: slot (V, 4) bool (the part has both
+    sides), boundary (total,) float32 each map stacked (H, W, 2) (SIDE_A, SIDE_B) and flattened,
+    boundary_at, boundary_shape, boundary_origin (V, 4[, 2]), boundary_width (V, 4) [px]."""
+    K: np.ndarray
+    R: np.ndarray
+    t: np.ndarray
+    D: np.ndarray
+    has_outline: np.ndarray
+    outside: np.ndarray
+    outside_at: np.ndarray
+    outside_shape: np.ndarray
+    outside_origin: np.ndarray
+    slot: np.ndarray
+    boundary: np.ndarray
+    boundary_at: np.ndarray
+    boundary_shape: np.ndarray
+    boundary_origin: np.ndarray
+    boundary_width: np.ndarray
+
+
+class StagePack(NamedTuple):
+    """One stage's search in arrays. indices (n,): the parameters searched; base (29,): the others'
+    values; start, steps (n,) and low, high (n,) (±inf: no limit) for the priors; capsules (K,) bone
+    indices, capsule_radius (K,) [m], capsule_terminal (K,) bool; assigned (V,) bool (the view has an
+    outline assignment), points (P, 2) [px] and point_view (P,) the assigned outline points; bones (B,)
+    bone indices with labelled boundaries and bone_slot (B,) their MAP_LABELS slot; keypoint_view,
+    keypoint_joint (Q,), keypoint_xy (Q, 2) [px], keypoint_weight (Q,); weights (10,): enclosure, outline,
+    inside, outline scale, outline gate, boundary, keypoint, keypoint scale, smoothness, limit
+    (FitterSettings)."""
+    indices: np.ndarray
+    base: np.ndarray
+    start: np.ndarray
+    steps: np.ndarray
+    low: np.ndarray
+    high: np.ndarray
+    capsules: np.ndarray
+    capsule_radius: np.ndarray
+    capsule_terminal: np.ndarray
+    assigned: np.ndarray
+    points: np.ndarray
+    point_view: np.ndarray
+    bones: np.ndarray
+    bone_slot: np.ndarray
+    keypoint_view: np.ndarray
+    keypoint_joint: np.ndarray
+    keypoint_xy: np.ndarray
+    keypoint_weight: np.ndarray
+    weights: np.ndarray
+
+
+def _flattened(maps):
+    """(buffer (total,) float32, offsets (N,), shapes (N, 2)) of maps, each (H, W[, 2]) (None: absent)."""
+    offsets, shapes, total = [], [], 0
+    for m in maps:
+        offsets.append(total)
+        shapes.append(m.shape[:2] if m is not None else (0, 0))
+        total += m.size if m is not None else 0
+    present = [np.ascontiguousarray(m, np.float32).ravel() for m in maps if m is not None]
+    buffer = np.concatenate(present) if present else np.zeros(0, np.float32)
+    return buffer, np.array(offsets, np.int64), np.array(shapes, np.int64).reshape(-1, 2)
+
+
+def pack_frame(views):
+    """The FramePack of a list of fitter.View."""
+    cameras = [view.camera for view in views]
+    outside, outside_at, outside_shape = _flattened([v.outline.outside if v.outline is not None else None for v in views])
+    slots = [[v.distances is not None and label in v.distances.widths for label in MAP_LABELS] for v in views]
+    stacked = [np.dstack([v.distances.maps[(label, SIDE_A)], v.distances.maps[(label, SIDE_B)]]) if present else None
+               for v, row in zip(views, slots) for label, present in zip(MAP_LABELS, row)]
+    boundary, boundary_at, boundary_shape = _flattened(stacked)
+    count = len(views)
+    return FramePack(
+        np.array([c.K for c in cameras], np.float64).reshape(count, 3, 3),
+        np.array([c.R for c in cameras], np.float64).reshape(count, 3, 3),
+        np.array([c.t for c in cameras], np.float64).reshape(count, 3),
+        np.array([c.D for c in cameras], np.float64).reshape(count, 5),
+        np.array([v.outline is not None for v in views], np.bool_), outside, outside_at, outside_shape,
+        np.array([v.outline.origin if v.outline is not None else (0, 0) for v in views], np.float64).reshape(count, 2),
+        np.array(slots, np.bool_).reshape(count, len(MAP_LABELS)), boundary,
+        boundary_at.reshape(count, len(MAP_LABELS)), boundary_shape.reshape(count, len(MAP_LABELS), 2),
+        np.array([[v.distances.origin if v.distances is not None else (0, 0)] * len(MAP_LABELS) for v in views],
+                 np.float64).reshape(count, len(MAP_LABELS), 2),
+        np.array([[v.distances.widths.get(label, 0.0) if v.distances is not None else 0.0 for label in MAP_LABELS]
+                  for v in views], np.float64).reshape(count, len(MAP_LABELS)))
+
+
+@njit(cache=True, error_model='numpy')
+def _project(frame, view, joints):
+    """body.camera.Camera.project of joints (J, 3) in view `view`: pixels (J, 2), depths (J,)."""
+    K, R, t, D = frame.K[view], frame.R[view], frame.t[view], frame.D[view]
+    count = joints.shape[0]
+    pixels, depth = np.empty((count, 2)), np.empty(count)
+    distorted = D[0] != 0 or D[1] != 0 or D[2] != 0 or D[3] != 0 or D[4] != 0
+    for j in range(count):
+        c = joints[j] @ R.T + t
+        depth[j] = c[2]
+        x, y = c[0] / c[2], c[1] / c[2]
+        if distorted:
+            r2 = x * x + y * y
+            radial = 1 + r2 * (D[0] + r2 * (D[1] + r2 * D[4]))
+            x, y = (x * radial + 2 * D[2] * x * y + D[3] * (r2 + 2 * x * x),
+                    y * radial + D[2] * (r2 + 2 * y * y) + 2 * D[3] * x * y)
+        pixels[j, 0] = x * K[0, 0] + y * K[0, 1] + K[0, 2]
+        pixels[j, 1] = x * K[1, 0] + y * K[1, 1] + K[1, 2]
+    return pixels, depth
+
+
+@njit(cache=True, error_model='numpy')
+def _bilinear(buffer, at, height, width, channels, channel, x, y):
+    """objective.bilinear of one map (flattened at `at`, (height, width, channels)) at a point (x, y) in
+    the map's pixels: bilinear inside, the nearest edge value plus the distance outside."""
+    cx, cy = min(max(x, 0.0), width - 1.0), min(max(y, 0.0), height - 1.0)
+    qx, qy = int(np.rint(cx * BILINEAR_STEPS)), int(np.rint(cy * BILINEAR_STEPS))
+    x0, y0 = qx // BILINEAR_STEPS, qy // BILINEAR_STEPS
+    x1, y1 = min(x0 + 1, width - 1), min(y0 + 1, height - 1)
+    fx, fy = (qx % BILINEAR_STEPS) / BILINEAR_STEPS, (qy % BILINEAR_STEPS) / BILINEAR_STEPS
+    v00 = np.float64(buffer[at + (y0 * width + x0) * channels + channel])
+    v01 = np.float64(buffer[at + (y0 * width + x1) * channels + channel])
+    v10 = np.float64(buffer[at + (y1 * width + x0) * channels + channel])
+    v11 = np.float64(buffer[at + (y1 * width + x1) * channels + channel])
+    top = v00 + fx * (v01 - v00)
+    bottom = v10 + fx * (v11 - v10)
+    return top + fy * (bottom - top) + np.hypot(x - cx, y - cy)
+
+
+@njit(cache=True, error_model='numpy')
+def stage_objective(values, stage, frame, bone_lengths, fractions, samples, used):
+    """The stage's objective (StageSearch.search's cost: stage_cost plus the priors) at `values` (n,) of
+    its parameters. stage: StagePack; frame: FramePack; bone_lengths (14,) [m]; fractions
+    (SEGMENT_POINTS,) and samples (INSIDE_SAMPLES,): objective._fractions; used (V,) bool, set where a view
+    contributed. Returns the cost (the reference's units: px and px² under the settings' weights)."""
+    w = stage.weights
+    parameters = stage.base.copy()
+    smoothness = limits = 0.0
+    for i in range(len(stage.indices)):
+        parameters[stage.indices[i]] = values[i]
+        step = (values[i] - stage.start[i]) / stage.steps[i]
+        smoothness += step * step
+        beyond = max(stage.low[i] - values[i], 0.0) + max(values[i] - stage.high[i], 0.0)
+        limits += beyond * beyond
+    joints = forward_joints(parameters, bone_lengths)
+    total = 0.0
+    outline = 0.0
+    views = frame.K.shape[0]
+    capsule_count = len(stage.capsules)
+    for v in range(views):
+        used[v] = False
+        pixels, depth = _project(frame, v, joints)
+        # The outline term and the inside term (objective.outline_cost, inside_cost).
+        usable = stage.assigned[v] and frame.has_outline[v]
+        for k in range(capsule_count):
+            bone = stage.capsules[k]
+            if depth[CHAIN_START[bone]] <= 0 or depth[CHAIN_END[bone]] <= 0:
+                usable = False
+        if usable:
+            used[v] = True
+            starts, ends, radii = np.empty((capsule_count, 2)), np.empty((capsule_count, 2)), np.empty(capsule_count)
+            height, width = frame.outside_shape[v, 0], frame.outside_shape[v, 1]
+            inside = 0.0
+            for k in range(capsule_count):
+                a, b = CHAIN_START[stage.capsules[k]], CHAIN_END[stage.capsules[k]]
+                starts[k, :] = pixels[a]
+                ends[k, :] = pixels[b]
+                radii[k] = stage.capsule_radius[k] * frame.K[v, 0, 0] / max(0.5 * (depth[a] + depth[b]), 0.1)
+                for s in range(len(samples)):
+                    px = np.rint(starts[k, 0] + samples[s] * (ends[k, 0] - starts[k, 0]) - frame.outside_origin[v, 0])
+                    py = np.rint(starts[k, 1] + samples[s] * (ends[k, 1] - starts[k, 1]) - frame.outside_origin[v, 1])
+                    column = int(min(max(px, 0.0), width - 1.0))
+                    row = int(min(max(py, 0.0), height - 1.0))
+                    d = np.float64(frame.outside[frame.outside_at[v] + row * width + column])
+                    inside += d * d
+            total += w[2] * inside
+            for p in range(len(stage.points)):
+                if stage.point_view[p] != v:
+                    continue
+                nearest = np.inf
+                for k in range(capsule_count):
+                    ax, ay = ends[k, 0] - starts[k, 0], ends[k, 1] - starts[k, 1]
+                    ox, oy = stage.points[p, 0] - starts[k, 0], stage.points[p, 1] - starts[k, 1]
+                    along = (ox * ax + oy * ay) / (ax * ax + ay * ay + 1e-9)
+                    if along > 1.0 and stage.capsule_terminal[k]:
+                        continue
+                    clamped = min(max(along, 0.0), 1.0)
+                    gx, gy = ox - clamped * ax, oy - clamped * ay
+                    nearest = min(nearest, np.sqrt(gx * gx + gy * gy) - radii[k])
+                e = min(nearest, w[4]) / w[3]
+                outline += w[3] * w[3] * np.log1p(e * e)
+        # Eq. 4–5 with the enclosure term for the stage's labelled bones (objective.limb_cost).
+        for i in range(len(stage.bones)):
+            a, b = CHAIN_START[stage.bones[i]], CHAIN_END[stage.bones[i]]
+            slot = stage.bone_slot[i]
+            if depth[a] <= 0 or depth[b] <= 0 or not frame.slot[v, slot]:
+                continue
+            used[v] = True
+            at = frame.boundary_at[v, slot]
+            height, width = frame.boundary_shape[v, slot, 0], frame.boundary_shape[v, slot, 1]
+            ox, oy = frame.boundary_origin[v, slot, 0], frame.boundary_origin[v, slot, 1]
+            sum1 = sum2 = enclosure = 0.0
+            for s in range(len(fractions)):
+                x = pixels[a, 0] + fractions[s] * (pixels[b, 0] - pixels[a, 0]) - ox
+                y = pixels[a, 1] + fractions[s] * (pixels[b, 1] - pixels[a, 1]) - oy
+                d1 = _bilinear(frame.boundary, at, height, width, 2, 0, x, y)
+                d2 = _bilinear(frame.boundary, at, height, width, 2, 1, x, y)
+                sum1 += d1
+                sum2 += d2
+                enclosure += max(d1 + d2 - frame.boundary_width[v, slot], 0.0)
+            total += w[5] * (abs(sum1 - sum2) + w[0] * enclosure)
+        # The keypoints' robust reprojection distance.
+        for q in range(len(stage.keypoint_view)):
+            if stage.keypoint_view[q] != v:
+                continue
+            used[v] = True
+            j = stage.keypoint_joint[q]
+            error = np.hypot(pixels[j, 0] - stage.keypoint_xy[q, 0], pixels[j, 1] - stage.keypoint_xy[q, 1])
+            total += w[6] * w[7] * stage.keypoint_weight[q] * np.log1p(error / w[7])
+    total += w[1] * OUTLINE_STEP * outline
+    return total + w[8] * smoothness + w[9] * limits
+
+
+def fractions_arrays():
+    """(SEGMENT_POINTS,), (INSIDE_SAMPLES,) float64: objective._fractions, the S_j and inside samples' positions."""
+    return np.ascontiguousarray(_fractions(SEGMENT_POINTS)[:, 0]), np.ascontiguousarray(_fractions(INSIDE_SAMPLES)[:, 0])
+
+
+# Nelder–Mead (Lagarias et al. 1998) with paper 000's coefficients (Eq. 7): reflection ρ = 1, expansion
+# χ = 2, contraction γ = 0.5, shrink σ = 0.5; step for step SciPy's non-adaptive
+# scipy.optimize.minimize(method='Nelder-Mead') with an initial simplex, xatol, fatol and maxfev (its
+# _minimize_neldermead, SciPy 1.17), so that a search gives SciPy's result (tests/test_compiled.py),
+# without the interpreter between the evaluations.
+REFLECTION, EXPANSION, CONTRACTION, SHRINK = 1.0, 2.0, 0.5, 0.5
+
+
+@njit(cache=True)
+def _sort_simplex(simplex, costs):
+    """Sort the vertices by cost, ascending; ties keep their order (insertion sort, as numpy's sort of
+    fewer than 16 numbers)."""
+    for i in range(1, len(costs)):
+        j = i
+        while j > 0 and costs[j] < costs[j - 1]:
+            costs[j], costs[j - 1] = costs[j - 1], costs[j]
+            row = simplex[j].copy()
+            simplex[j] = simplex[j - 1]
+            simplex[j - 1] = row
+            j -= 1
+
+
+@njit(cache=True)
+def nelder_mead(simplex, xatol, fatol, maxfev, stage, frame, bone_lengths, fractions, samples, used):
+    """Minimise stage_objective from the initial simplex (n + 1, n). Returns (x (n,), cost, evaluations).
+    At most maxfev evaluations; as in SciPy, the evaluation that would exceed them ends the search
+    where it stands."""
+    sim = simplex.copy()
+    n = sim.shape[1]
+    costs = np.full(n + 1, np.inf)
+    calls = 0
+    for k in range(n + 1):
+        if calls >= maxfev:
+            break
+        calls += 1
+        costs[k] = stage_objective(sim[k].copy(), stage, frame, bone_lengths, fractions, samples, used)
+    _sort_simplex(sim, costs)
+    while calls < maxfev:
+        if np.max(np.abs(sim[1:] - sim[0])) <= xatol and np.max(np.abs(costs[0] - costs[1:])) <= fatol:
+            break
+        centroid = sim[0].copy()
+        for row in range(1, n):
+            centroid += sim[row]
+        centroid /= n
+        worst = sim[n].copy()
+        reflected = (1 + REFLECTION) * centroid - REFLECTION * worst
+        if calls >= maxfev:
+            break
+        calls += 1
+        cost_reflected = stage_objective(reflected, stage, frame, bone_lengths, fractions, samples, used)
+        shrink = False
+        if cost_reflected < costs[0]:
+            expanded = (1 + REFLECTION * EXPANSION) * centroid - REFLECTION * EXPANSION * worst
+            if calls >= maxfev:
+                break
+            calls += 1
+            cost_expanded = stage_objective(expanded, stage, frame, bone_lengths, fractions, samples, used)
+            if cost_expanded < cost_reflected:
+                sim[n], costs[n] = expanded, cost_expanded
+            else:
+                sim[n], costs[n] = reflected, cost_reflected
+        elif cost_reflected < costs[n - 1]:
+            sim[n], costs[n] = reflected, cost_reflected
+        else:
+            if cost_reflected < costs[n]:
+                contracted = (1 + CONTRACTION * REFLECTION) * centroid - CONTRACTION * REFLECTION * worst
+                if calls >= maxfev:
+                    break
+                calls += 1
+                cost_contracted = stage_objective(contracted, stage, frame, bone_lengths, fractions, samples, used)
+                if cost_contracted <= cost_reflected:
+                    sim[n], costs[n] = contracted, cost_contracted
+                else:
+                    shrink = True
+            else:
+                contracted = (1 - CONTRACTION) * centroid + CONTRACTION * worst
+                if calls >= maxfev:
+                    break
+                calls += 1
+                cost_contracted = stage_objective(contracted, stage, frame, bone_lengths, fractions, samples, used)
+                if cost_contracted < costs[n]:
+                    sim[n], costs[n] = contracted, cost_contracted
+                else:
+                    shrink = True
+            if shrink:
+                for j in range(1, n + 1):
+                    sim[j] = sim[0] + SHRINK * (sim[j] - sim[0])
+                    if calls >= maxfev:
+                        break
+                    calls += 1
+                    costs[j] = stage_objective(sim[j].copy(), stage, frame, bone_lengths, fractions, samples, used)
+        _sort_simplex(sim, costs)
+    _sort_simplex(sim, costs)
+    return sim[0].copy(), costs[0], calls

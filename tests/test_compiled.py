@@ -1,0 +1,125 @@
+"""The compiled objective and forward kinematics (fitting/compiled.py) equal the numpy reference
+(StageSearch.stage_cost plus the search's priors, kinematics.forward_kinematics) to 1e-9 on random poses,
+with the evidence of real features: studio renders of the CMU walk through the feature pipeline (labelled
+boundaries, outlines, keypoints), in a rig with and without lens distortion."""
+import math
+
+import numpy as np
+import pytest
+
+from mvpose_nodes.body.camera import studio_rig
+from mvpose_nodes.body.kinematics import bone_lengths, forward_kinematics, inverse_kinematics
+from mvpose_nodes.body.model import STAGE_NAMES
+from mvpose_nodes.fitting.compiled import bone_length_array, forward_joints, pack_frame
+from mvpose_nodes.fitting.fitter import view_from_features
+from mvpose_nodes.fitting.settings import FitterSettings
+from mvpose_nodes.fitting.stage_search import JOINT_LIMITS, STAGE_PARAMETERS, StageSearch, stage_indices
+from mvpose_nodes.ros.params import default_skin_model_path
+from mvpose_nodes.studio import scene
+from mvpose_nodes.vision.features import FeatureExtractor, FeatureSettings
+from mvpose_nodes.vision.skin import SkinModel
+
+pytestmark = pytest.mark.pure
+
+POSES = 12          # random poses per stage
+RELATIVE = 1e-9
+
+
+@pytest.fixture(scope='module', params=[0.0, -0.05], ids=['pinhole', 'barrel'])
+def walk_frame(request, cmu_walk):
+    """(truth joints (15, 3), [fitter.View]) of one walking frame in cameras 2, 5 and 7 at 960×540, the
+    views from the feature pipeline; the rig with radial distortion k1 as the parameter."""
+    motion = cmu_walk.placed(heading=math.radians(30))
+    i = len(motion.joints) // 2
+    pose = scene.BodyPose(motion.joints[i], motion.toes[i], motion.hand_tips[i], motion.head_forward[i])
+    extractor = FeatureExtractor(FeatureSettings(), SkinModel.load(default_skin_model_path()))
+    views = []
+    for camera in studio_rig((960, 540), cameras=[2, 5, 7]):
+        camera = camera.__class__(**{**camera.__dict__, 'D': np.array([request.param, 0.0, 0.0, 0.0, 0.0])})
+        view = scene.prepare_camera(camera)
+        rgb, _ = scene.Realism().finish(scene.render(view, pose, scene.Appearance()), view, camera.number, 0, 0)
+        features = extractor(rgb)
+        views.append(view_from_features(camera, features.visible_keypoints(), features.contour, features.frontness))
+    assert all(view.distances is not None and view.distances.widths for view in views)
+    return motion.joints[i], views
+
+
+def reference_objective(search, stage, parameters, start, views, assigned):
+    """StageSearch.stage_cost plus the priors, as the search's cost adds them."""
+    settings = search.settings
+    indices = stage_indices(stage)
+    steps = np.array([settings.step_position if name.endswith(('_x', '_y', '_z')) else settings.step_angle
+                      for name in STAGE_PARAMETERS[stage]])
+    total, used = search.stage_cost(stage, parameters, views, assigned)
+    total += settings.smoothness_weight * np.sum(((parameters[indices] - start[indices]) / steps) ** 2)
+    for i, name in enumerate(STAGE_PARAMETERS[stage]):
+        if name in JOINT_LIMITS:
+            low, high = JOINT_LIMITS[name]
+            value = parameters[indices[i]]
+            total += settings.limit_weight * (max(low - value, 0.0) + max(value - high, 0.0)) ** 2
+    return total, sorted(used)
+
+
+def test_compiled_forward_kinematics_equals_the_reference():
+    rng = np.random.default_rng(1)
+    lengths = bone_lengths(1.5 + 0.45 * rng.random())
+    for _ in range(50):
+        parameters = rng.normal(scale=1.0, size=29)
+        assert np.abs(forward_joints(parameters, bone_length_array(lengths))
+                      - forward_kinematics(parameters, lengths)[0]).max() < 1e-9
+
+
+@pytest.mark.parametrize('stage', STAGE_NAMES)
+def test_compiled_stage_objective_equals_the_reference_on_random_poses(walk_frame, stage):
+    truth, views = walk_frame
+    search = StageSearch(FitterSettings(), bone_lengths(1.75))
+    search.new_frame()
+    frame = pack_frame(views)
+    rng = np.random.default_rng(STAGE_NAMES.index(stage))
+    true_parameters = inverse_kinematics(truth)
+    indices = stage_indices(stage)
+    compared = 0
+    for _ in range(POSES):
+        start = true_parameters + rng.normal(scale=0.1, size=29)
+        assigned = search.outline_assignment(stage, start, views)
+        pack = search.stage_pack(stage, start, views, assigned, priors=True)
+        trial = start.copy()
+        trial[indices] += rng.normal(scale=0.4, size=len(indices))   # also beyond the joint limits
+        reference, used = reference_objective(search, stage, trial, start, views, assigned)
+        flags = np.zeros(len(views), bool)
+        from mvpose_nodes.fitting.compiled import stage_objective
+        from mvpose_nodes.fitting.stage_search import FRACTIONS, SAMPLES
+        compiled = stage_objective(trial[indices], pack, frame, search.bone_lengths, FRACTIONS, SAMPLES, flags)
+        assert compiled == pytest.approx(reference, rel=RELATIVE), (stage, trial)
+        assert np.flatnonzero(flags).tolist() == used
+        without_priors, used_views = search.compiled_cost(stage, trial, views, assigned, frame)
+        assert without_priors == pytest.approx(search.stage_cost(stage, trial, views, assigned)[0], rel=RELATIVE)
+        compared += reference > 0
+    assert compared == POSES, 'every pose has evidence in this stage'
+
+
+@pytest.mark.parametrize('stage', ['torso', 'left_arm', 'right_leg'])
+def test_compiled_nelder_mead_takes_scipys_steps(walk_frame, stage):
+    """From the same simplex, the compiled search visits SciPy's points: the same result and evaluation
+    count, also when the evaluation budget ends it."""
+    from scipy.optimize import minimize
+    from mvpose_nodes.fitting.compiled import nelder_mead, stage_objective
+    from mvpose_nodes.fitting.stage_search import FRACTIONS, SAMPLES
+    truth, views = walk_frame
+    search = StageSearch(FitterSettings(), bone_lengths(1.75))
+    search.new_frame()
+    frame = pack_frame(views)
+    rng = np.random.default_rng(7)
+    indices = stage_indices(stage)
+    for budget in (1000, 40):
+        start = inverse_kinematics(truth) + rng.normal(scale=0.1, size=29)
+        pack = search.stage_pack(stage, start, views, search.outline_assignment(stage, start, views), priors=True)
+        flags = np.zeros(len(views), bool)
+        simplex = np.vstack([start[indices], start[indices] + np.diag(pack.steps)])
+        reference = minimize(stage_objective, start[indices], (pack, frame, search.bone_lengths, FRACTIONS, SAMPLES, flags),
+                             method='Nelder-Mead', options={'initial_simplex': simplex, 'xatol': 1e-2, 'fatol': np.inf,
+                                                            'adaptive': False, 'maxfev': budget})
+        x, cost, evaluations = nelder_mead(simplex, 1e-2, np.inf, budget, pack, frame, search.bone_lengths, FRACTIONS,
+                                           SAMPLES, flags)
+        assert evaluations == reference.nfev and (budget > 100 or evaluations == budget)
+        assert np.array_equal(x, reference.x) and cost == reference.fun
