@@ -9,15 +9,16 @@ import rclpy
 from common import Publisher, run_mvpose, spin_for, spin_until
 from mvpose_msgs.msg import LabelledContour, SkinEllipseArray
 from rclpy.qos import DurabilityPolicy, QoSProfile
-from sensor_msgs.msg import CameraInfo, Image
+from sensor_msgs.msg import CameraInfo, CompressedImage, Image
 
 from mvpose_nodes.ros.camera_bag import frame_stamp_ns
-from mvpose_nodes.ros.conversions import stamp_ns
+from mvpose_nodes.ros.conversions import image_from_compressed, stamp_ns
 
 pytestmark = pytest.mark.dds
 
 FRAMES = (60, 62)
-OUTPUTS = {'silhouette': Image, 'skin_ellipses': SkinEllipseArray, 'labelled_contour': LabelledContour}
+OUTPUTS = {'silhouette': Image, 'silhouette/compressed': CompressedImage, 'skin_ellipses': SkinEllipseArray,
+           'labelled_contour': LabelledContour}
 
 
 @pytest.fixture(scope='module')
@@ -34,7 +35,7 @@ def features_node(background):
 
 
 class Listener:
-    """This test process's subscriptions to the node's three outputs."""
+    """This test process's subscriptions to the node's outputs."""
 
     def __init__(self):
         self.node = rclpy.create_node('features_listener')
@@ -52,7 +53,7 @@ class Listener:
         self.node.destroy_node()
 
 
-def test_node_publishes_all_three_features_with_the_source_stamps(small_bag, features_node, ros_context):
+def test_node_publishes_every_feature_with_the_source_stamps(small_bag, features_node, ros_context):
     listener = Listener()
     try:
         listener.wait_for_node()
@@ -70,6 +71,10 @@ def test_node_publishes_all_three_features_with_the_source_stamps(small_bag, fea
     silhouette = listener.received['silhouette'][0]
     assert (silhouette.width, silhouette.height, silhouette.encoding) == (640, 360, 'mono8')
     assert set(np.frombuffer(bytes(silhouette.data), np.uint8)) == {0, 255}
+    compressed = listener.received['silhouette/compressed'][0]
+    assert compressed.format == 'mono8; png compressed mono8' and len(compressed.data) < len(silhouette.data) / 20
+    assert np.array_equal(image_from_compressed(compressed),
+                          np.frombuffer(bytes(silhouette.data), np.uint8).reshape(360, 640)), 'lossless'
     contour = listener.received['labelled_contour'][0]
     assert contour.status == LabelledContour.STATUS_OK and len(contour.x) == len(contour.labels) > 100
     ellipses = listener.received['skin_ellipses'][0]

@@ -24,7 +24,7 @@ from mvpose_nodes.vision.skin import SkinModel
 pytestmark = pytest.mark.dds
 
 CAMERAS = (3, 5)
-FEATURES = {'silhouette': Image, 'skin_ellipses': SkinEllipseArray, 'labelled_contour': LabelledContour}
+FEATURES = {'skin_ellipses': SkinEllipseArray, 'labelled_contour': LabelledContour}
 
 
 @pytest.fixture(scope='module')
@@ -69,8 +69,7 @@ def test_a_frame_set_seen_by_one_camera_gets_status_lost_with_the_last_pose(rend
                 header = Image().header
                 set_stamp(header, stamp, optical_frame(k))
                 if stamp == second and k == CAMERAS[1]:   # the person has left camera 5's view
-                    messages = empty_feature_messages(header, camera.width, camera.height,
-                                                      LabelledContour.STATUS_NO_PERSON, 'no person in the image')
+                    messages = empty_feature_messages(header, LabelledContour.STATUS_NO_PERSON, 'no person in the image')
                 else:
                     messages = feature_messages(features, header)
                 for topic, message in zip(FEATURES, messages):
@@ -102,7 +101,6 @@ def test_skeleton_fitter_node_survives_nan_calibration_and_malformed_contours(ba
     run_mvpose('topic', 'pub', '/cam5/camera_pose', 'geometry_msgs/msg/PoseStamped', pose, *qos)
     stamp = '{header: {stamp: {sec: 5}}'
     for k in (3, 5):  # one frame set whose contours have 3 pixels but 1 label
-        run_mvpose('topic', 'pub', f'/cam{k}/silhouette', 'sensor_msgs/msg/Image', stamp + '}', '-w', 1, '--once')
         run_mvpose('topic', 'pub', f'/cam{k}/skin_ellipses', 'mvpose_msgs/msg/SkinEllipseArray', stamp + '}',
                    '-w', 1, '--once')
         run_mvpose('topic', 'pub', f'/cam{k}/labelled_contour', 'mvpose_msgs/msg/LabelledContour',

@@ -14,7 +14,7 @@ from pathlib import Path
 
 from mvpose_nodes.tools.cli import UserError
 
-FEATURE_TOPICS = ('silhouette', 'skin_ellipses', 'labelled_contour')
+FEATURE_TOPICS = ('skin_ellipses', 'labelled_contour')   # the fitter's inputs
 GRAPH_CAMERAS = (3, 5, 7)        # the defaults of launch/mvpose.launch.yaml
 CONNECT_TIMEOUT = 60.0           # [s] for every node to start and every topic to connect
 QUIET_AFTER_PLAYBACK = 10.0      # [s] of no new skeleton after playback ends: the graph is done

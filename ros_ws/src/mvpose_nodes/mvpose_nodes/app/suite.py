@@ -197,7 +197,7 @@ def run_case(case):
         for view in views:
             number = view.camera.number
             header = set_stamp(Header(), stamp, optical_frame(number))
-            _, ellipses, contour = feature_messages(extractors[number](render_camera(case, view, motion, index)),
+            ellipses, contour = feature_messages(extractors[number](render_camera(case, view, motion, index)),
                                                     header)
             features[number] = cameras[number], ellipses, contour
         result = fitting.fit(stamp, features)

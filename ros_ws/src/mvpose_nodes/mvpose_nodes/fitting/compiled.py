@@ -17,6 +17,7 @@ from typing import NamedTuple
 
 import numpy as np
 from numba import njit
+from numba.typed import List
 
 from mvpose_nodes.body.kinematics import BONES, LENGTH_FRACTIONS, _ANGLE_INDEX, _CHAIN, _TORSO_POSITION
 from mvpose_nodes.body.model import JOINT_INDEX, JOINT_NAMES, LABEL_HEAD, LABEL_LEFT_LEG, LABEL_RIGHT_LEG, LABEL_TORSO
@@ -76,25 +77,25 @@ def forward_joints(parameters, bone_lengths):
 
 
 class FramePack(NamedTuple):
-    """One frame's views as arrays (V views, in the order of the fitter's view list).
+    """One frame's views for the compiled objective (V views, in the order of the fitter's view list);
+    the maps are the views' own arrays, not copies.
 
     K, R: (V, 3, 3); t: (V, 3); D: (V, 5) plumb_bob (body.camera.Camera). Silhouette maps
-    (objective.Outline.outside): has_outline (V,) bool, outside (total,) float32 all maps flattened,
-    outside_at (V,) offset, outside_shape (V, 2) (height, width), outside_origin (V, 2) (x0, y0) [px].
-    Boundary maps (objective.BoundaryDistances) of MAP_LABELS: slot (V, 4) bool (the part has both
-    sides), boundary (total,) float32 each map stacked (H, W, 2) (SIDE_A, SIDE_B) and flattened,
-    boundary_at, boundary_shape, boundary_origin (V, 4[, 2]), boundary_width (V, 4) [px]."""
+    (objective.Outline.outside): has_outline (V,) bool, outside: per view its map flattened (float32),
+    outside_shape (V, 2) (height, width), outside_origin (V, 2) (x0, y0) [px]. Boundary maps
+    (objective.BoundaryDistances) of MAP_LABELS: slot (V, 4) bool (the part has both sides), boundary:
+    per view its BoundaryDistances.buffer, boundary_at (V, 4, 2) each side's map's offset in it,
+    boundary_shape, boundary_origin (V, 4, 2), boundary_width (V, 4) [px]."""
     K: np.ndarray
     R: np.ndarray
     t: np.ndarray
     D: np.ndarray
     has_outline: np.ndarray
-    outside: np.ndarray
-    outside_at: np.ndarray
+    outside: List
     outside_shape: np.ndarray
     outside_origin: np.ndarray
     slot: np.ndarray
-    boundary: np.ndarray
+    boundary: List
     boundary_at: np.ndarray
     boundary_shape: np.ndarray
     boundary_origin: np.ndarray
@@ -131,40 +132,31 @@ class StagePack(NamedTuple):
     weights: np.ndarray
 
 
-def _flattened(maps):
-    """(buffer (total,) float32, offsets (N,), shapes (N, 2)) of maps, each (H, W[, 2]) (None: absent)."""
-    offsets, shapes, total = [], [], 0
-    for m in maps:
-        offsets.append(total)
-        shapes.append(m.shape[:2] if m is not None else (0, 0))
-        total += m.size if m is not None else 0
-    present = [np.ascontiguousarray(m, np.float32).ravel() for m in maps if m is not None]
-    buffer = np.concatenate(present) if present else np.zeros(0, np.float32)
-    return buffer, np.array(offsets, np.int64), np.array(shapes, np.int64).reshape(-1, 2)
-
-
 def pack_frame(views):
     """The FramePack of a list of fitter.View."""
-    cameras = [view.camera for view in views]
-    outside, outside_at, outside_shape = _flattened([v.outline.outside if v.outline is not None else None for v in views])
-    slots = [[v.distances is not None and label in v.distances.widths for label in MAP_LABELS] for v in views]
-    stacked = [np.dstack([v.distances.maps[(label, SIDE_A)], v.distances.maps[(label, SIDE_B)]]) if present else None
-               for v, row in zip(views, slots) for label, present in zip(MAP_LABELS, row)]
-    boundary, boundary_at, boundary_shape = _flattened(stacked)
-    count = len(views)
+    count, labels = len(views), len(MAP_LABELS)
+    outside, boundary = List(), List()
+    slot, width = np.zeros((count, labels), np.bool_), np.zeros((count, labels))
+    at, shape, origin = (np.zeros((count, labels, 2), dtype) for dtype in (np.int64, np.int64, np.float64))
+    for v, view in enumerate(views):
+        outside.append(view.outline.outside.ravel() if view.outline is not None else np.zeros(0, np.float32))
+        distances = view.distances
+        boundary.append(distances.buffer if distances is not None else np.zeros(0, np.float32))
+        for k, label in enumerate(MAP_LABELS):
+            if distances is None or label not in distances.widths:
+                continue
+            slot[v, k], width[v, k], origin[v, k] = True, distances.widths[label], distances.origins[label]
+            shape[v, k] = distances.maps[(label, SIDE_A)].shape
+            at[v, k] = distances.offsets[(label, SIDE_A)], distances.offsets[(label, SIDE_B)]
     return FramePack(
-        np.array([c.K for c in cameras], np.float64).reshape(count, 3, 3),
-        np.array([c.R for c in cameras], np.float64).reshape(count, 3, 3),
-        np.array([c.t for c in cameras], np.float64).reshape(count, 3),
-        np.array([c.D for c in cameras], np.float64).reshape(count, 5),
-        np.array([v.outline is not None for v in views], np.bool_), outside, outside_at, outside_shape,
+        np.array([v.camera.K for v in views], np.float64).reshape(count, 3, 3),
+        np.array([v.camera.R for v in views], np.float64).reshape(count, 3, 3),
+        np.array([v.camera.t for v in views], np.float64).reshape(count, 3),
+        np.array([v.camera.D for v in views], np.float64).reshape(count, 5),
+        np.array([v.outline is not None for v in views], np.bool_), outside,
+        np.array([v.outline.outside.shape if v.outline is not None else (0, 0) for v in views], np.int64).reshape(count, 2),
         np.array([v.outline.origin if v.outline is not None else (0, 0) for v in views], np.float64).reshape(count, 2),
-        np.array(slots, np.bool_).reshape(count, len(MAP_LABELS)), boundary,
-        boundary_at.reshape(count, len(MAP_LABELS)), boundary_shape.reshape(count, len(MAP_LABELS), 2),
-        np.array([[v.distances.origin if v.distances is not None else (0, 0)] * len(MAP_LABELS) for v in views],
-                 np.float64).reshape(count, len(MAP_LABELS), 2),
-        np.array([[v.distances.widths.get(label, 0.0) if v.distances is not None else 0.0 for label in MAP_LABELS]
-                  for v in views], np.float64).reshape(count, len(MAP_LABELS)))
+        slot, boundary, at, shape, origin, width)
 
 
 @njit(cache=True, error_model='numpy')
@@ -189,18 +181,18 @@ def _project(frame, view, joints):
 
 
 @njit(cache=True, error_model='numpy')
-def _bilinear(buffer, at, height, width, channels, channel, x, y):
-    """objective.bilinear of one map (flattened at `at`, (height, width, channels)) at a point (x, y) in
-    the map's pixels: bilinear inside, the nearest edge value plus the distance outside."""
+def _bilinear(buffer, at, height, width, x, y):
+    """objective.bilinear of one (height, width) map, flattened in `buffer` from index `at`, at a point
+    (x, y) in the map's pixels: bilinear inside, the nearest edge value plus the distance outside."""
     cx, cy = min(max(x, 0.0), width - 1.0), min(max(y, 0.0), height - 1.0)
     qx, qy = int(np.rint(cx * BILINEAR_STEPS)), int(np.rint(cy * BILINEAR_STEPS))
     x0, y0 = qx // BILINEAR_STEPS, qy // BILINEAR_STEPS
     x1, y1 = min(x0 + 1, width - 1), min(y0 + 1, height - 1)
     fx, fy = (qx % BILINEAR_STEPS) / BILINEAR_STEPS, (qy % BILINEAR_STEPS) / BILINEAR_STEPS
-    v00 = np.float64(buffer[at + (y0 * width + x0) * channels + channel])
-    v01 = np.float64(buffer[at + (y0 * width + x1) * channels + channel])
-    v10 = np.float64(buffer[at + (y1 * width + x0) * channels + channel])
-    v11 = np.float64(buffer[at + (y1 * width + x1) * channels + channel])
+    v00 = np.float64(buffer[at + y0 * width + x0])
+    v01 = np.float64(buffer[at + y0 * width + x1])
+    v10 = np.float64(buffer[at + y1 * width + x0])
+    v11 = np.float64(buffer[at + y1 * width + x1])
     top = v00 + fx * (v01 - v00)
     bottom = v10 + fx * (v11 - v10)
     return top + fy * (bottom - top) + np.hypot(x - cx, y - cy)
@@ -250,7 +242,7 @@ def stage_objective(values, stage, frame, bone_lengths, fractions, samples, used
                     py = np.rint(starts[k, 1] + samples[s] * (ends[k, 1] - starts[k, 1]) - frame.outside_origin[v, 1])
                     column = int(min(max(px, 0.0), width - 1.0))
                     row = int(min(max(py, 0.0), height - 1.0))
-                    d = np.float64(frame.outside[frame.outside_at[v] + row * width + column])
+                    d = np.float64(frame.outside[v][row * width + column])
                     inside += d * d
             total += w[2] * inside
             for p in range(len(stage.points)):
@@ -275,15 +267,15 @@ def stage_objective(values, stage, frame, bone_lengths, fractions, samples, used
             if depth[a] <= 0 or depth[b] <= 0 or not frame.slot[v, slot]:
                 continue
             used[v] = True
-            at = frame.boundary_at[v, slot]
+            at_a, at_b = frame.boundary_at[v, slot, 0], frame.boundary_at[v, slot, 1]
             height, width = frame.boundary_shape[v, slot, 0], frame.boundary_shape[v, slot, 1]
             ox, oy = frame.boundary_origin[v, slot, 0], frame.boundary_origin[v, slot, 1]
             sum1 = sum2 = enclosure = 0.0
             for s in range(len(fractions)):
                 x = pixels[a, 0] + fractions[s] * (pixels[b, 0] - pixels[a, 0]) - ox
                 y = pixels[a, 1] + fractions[s] * (pixels[b, 1] - pixels[a, 1]) - oy
-                d1 = _bilinear(frame.boundary, at, height, width, 2, 0, x, y)
-                d2 = _bilinear(frame.boundary, at, height, width, 2, 1, x, y)
+                d1 = _bilinear(frame.boundary[v], at_a, height, width, x, y)
+                d2 = _bilinear(frame.boundary[v], at_b, height, width, x, y)
                 sum1 += d1
                 sum2 += d2
                 enclosure += max(d1 + d2 - frame.boundary_width[v, slot], 0.0)

@@ -19,7 +19,7 @@ import numpy as np
 
 from mvpose_nodes.body.kinematics import forward_kinematics, inverse_kinematics
 from mvpose_nodes.body.model import JOINT_INDEX, STAGE_NAMES
-from mvpose_nodes.fitting.compiled import pack_frame
+from mvpose_nodes.fitting.compiled import MAP_LABELS, pack_frame
 from mvpose_nodes.fitting.initialisation import (PAIRED_LIMBS, completed_joints, labelled_joints, person_lengths,
                                                  triangulated_joints)
 from mvpose_nodes.fitting.limb_sides import (FacingWatch, LimbTracks, exchange, face_votes, facing_travel,
@@ -203,7 +203,7 @@ def view_from_features(camera, keypoints, contour, frontness=None, skin=None):
     centres [px] and areas [px²])."""
     distances = outline = None
     if contour is not None and len(contour.points):
-        distances = boundary_distances(contour, (camera.width, camera.height))
+        distances = boundary_distances(contour, (camera.width, camera.height), MAP_LABELS)
         outline = outline_of(contour.points)
     skin = None if skin is None else np.asarray(skin, float).reshape(-1, 3)
     return View(camera, distances, keypoints, frontness, outline, skin)

@@ -30,24 +30,32 @@ BILINEAR_STEPS = 32   # map look-ups resolve 1/32 px, as cv2.remap (INTER_BITS =
 class BoundaryDistances:
     """One camera's distance maps for one frame.
 
-    origin: (x0, y0) [px], the image pixel of every map's element [0, 0] (all maps share one box: the
-    contour's bounding box grown by MAP_MARGIN_PX, clipped to the image). maps: (label, side) -> (H, W)
-    float32 [px], the Euclidean distance from each pixel to the nearest contour pixel of that part and side
-    (only (label, side) pairs that have pixels are present). widths: label -> float [px], the Hausdorff
+    maps: (label, side) -> (H, W) float32 [px], the Euclidean distance from each pixel to the nearest
+    contour pixel of that part and side (only (label, side) pairs that have pixels are present); origins:
+    label -> (x0, y0) [px], the image pixel of element [0, 0] of the label's two maps (the contour's
+    bounding box grown by MAP_MARGIN_PX, clipped to the image). widths: label -> float [px], the Hausdorff
     distance between the part's two boundaries: the widest the part gets (for the enclosure term).
+    buffer: (N,) float32, every map flattened one after the other (the maps are views of it; compiled.py
+    reads them there without copying), offsets: (label, side) -> the index of the map's first element.
     """
-    origin: tuple
     maps: dict
+    origins: dict
     widths: dict
-    _stacked: dict = field(default_factory=dict, compare=False, repr=False)  # label -> (H, W, 2) both sides
+    buffer: np.ndarray = field(default_factory=lambda: np.zeros(0, np.float32), compare=False, repr=False)
+    offsets: dict = field(default_factory=dict)
 
     def swapped(self, label_a, label_b):
         """The same maps with two part labels exchanged (a view that had the person's left and right
         the wrong way round)."""
         exchange = {label_a: label_b, label_b: label_a}
-        return BoundaryDistances(self.origin, {(exchange.get(label, label), side): m for (label, side), m in self.maps.items()},
-                                 {exchange.get(label, label): w for label, w in self.widths.items()},
-                                 {exchange.get(label, label): m for label, m in self._stacked.items()})
+
+        def relabelled(by_label):
+            return {exchange.get(label, label): value for label, value in by_label.items()}
+
+        def relabelled_sides(by_side):
+            return {(exchange.get(label, label), side): value for (label, side), value in by_side.items()}
+        return BoundaryDistances(relabelled_sides(self.maps), relabelled(self.origins), relabelled(self.widths),
+                                 self.buffer, relabelled_sides(self.offsets))
 
     def distances(self, label, side, points):
         """Distances [px] (M,) float64 from points (M, 2) [px] (x, y) to the (label, side) boundary.
@@ -57,19 +65,11 @@ class BoundaryDistances:
         upper bound of the true distance, exact when the nearest boundary pixel lies straight inward from
         the box edge (the margin makes that typical), and never small for a segment far off the part.
         """
-        return self._interpolate(self.maps[(label, side)], points)
+        return bilinear(self.maps[(label, side)], np.asarray(points, dtype=float) - self.origins[label])
 
     def both_sides(self, label, points):
-        """(distances to SIDE_A, distances to SIDE_B) of points (M, 2): one interpolation of both maps."""
-        stacked = self._stacked.get(label)
-        if stacked is None:
-            stacked = self._stacked[label] = np.dstack([self.maps[(label, SIDE_A)], self.maps[(label, SIDE_B)]])
-        both = self._interpolate(stacked, points)
-        return both[:, 0], both[:, 1]
-
-    def _interpolate(self, distance_map, points):
-        """bilinear() of an (H, W) or (H, W, K) float32 map at points (M, 2) relative to the box's origin."""
-        return bilinear(distance_map, np.asarray(points, dtype=float) - self.origin)
+        """(distances to SIDE_A, distances to SIDE_B) of points (M, 2)."""
+        return self.distances(label, SIDE_A, points), self.distances(label, SIDE_B, points)
 
 
 def bilinear(distance_map, local):
@@ -99,30 +99,35 @@ def boundary_distances(contour_labels, image_size, labels=None, margin=MAP_MARGI
     """BoundaryDistances of one camera's ContourLabels for the parts in `labels` (default: every label
     with pixels on both sides). image_size: (width, height) [px]. One cv2.distanceTransform (DIST_L2,
     DIST_MASK_PRECISE: exact Euclidean distances) per (label, side) on a mask that is 0 on that side's
-    boundary pixels, restricted to the contour's box (about 1 ms per map for a 1080p person)."""
+    boundary pixels, restricted to the contour's box (about 3 ms per map for a 1080p person), written
+    straight into the BoundaryDistances' buffer."""
     points, part_labels, sides = contour_labels.points, contour_labels.labels, contour_labels.sides
     if labels is None:
         labels = set(part_labels[sides == SIDE_A].tolist()) & set(part_labels[sides == SIDE_B].tolist())
     if not len(points):
-        return BoundaryDistances((0, 0), {}, {})
+        return BoundaryDistances({}, {}, {})
     x0, y0 = np.maximum(points.min(axis=0) - margin, 0)
     x1, y1 = np.minimum(points.max(axis=0) + margin, np.subtract(image_size, 1))
-    maps, widths = {}, {}
+    shape = (int(y1 - y0 + 1), int(x1 - x0 + 1))
+    present = [(label, side) for label in labels for side in (SIDE_A, SIDE_B)
+               if np.any((part_labels == label) & (sides == side))]
+    buffer = np.empty(len(present) * shape[0] * shape[1], np.float32)
+    maps, origins, widths, offsets, side_pixels = {}, {}, {}, {}, {}
+    for index, (label, side) in enumerate(present):
+        pixels = points[(part_labels == label) & (sides == side)] - (x0, y0)
+        mask = np.ones(shape, np.uint8)
+        mask[pixels[:, 1], pixels[:, 0]] = 0
+        offsets[(label, side)] = index * shape[0] * shape[1]
+        maps[(label, side)] = buffer[offsets[(label, side)]:offsets[(label, side)] + mask.size].reshape(shape)
+        cv2.distanceTransform(mask, cv2.DIST_L2, cv2.DIST_MASK_PRECISE, dst=maps[(label, side)])
+        origins[label] = (int(x0), int(y0))
+        side_pixels[(label, side)] = pixels
     for label in labels:
-        side_pixels = {}
-        for side in (SIDE_A, SIDE_B):
-            pixels = points[(part_labels == label) & (sides == side)] - (x0, y0)
-            if not len(pixels):
-                continue
-            mask = np.ones((y1 - y0 + 1, x1 - x0 + 1), np.uint8)
-            mask[pixels[:, 1], pixels[:, 0]] = 0
-            maps[(label, side)] = cv2.distanceTransform(mask, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
-            side_pixels[side] = pixels
-        if len(side_pixels) == 2:
-            a, b = side_pixels[SIDE_A], side_pixels[SIDE_B]
+        if (label, SIDE_A) in maps and (label, SIDE_B) in maps:
+            a, b = side_pixels[(label, SIDE_A)], side_pixels[(label, SIDE_B)]
             widths[label] = float(max(maps[(label, SIDE_B)][a[:, 1], a[:, 0]].max(),
                                       maps[(label, SIDE_A)][b[:, 1], b[:, 0]].max()))
-    return BoundaryDistances((int(x0), int(y0)), maps, widths)
+    return BoundaryDistances(maps, origins, widths, buffer, offsets)
 
 
 def segment_points(a, b, n=SEGMENT_POINTS):

@@ -3,17 +3,20 @@
 Started once per camera in its namespace, which gives the camera number:
     ./mvpose run camera_features --ros-args -r __ns:=/cam3
 Subscribes image_raw/compressed and image_raw (rgb8/bgr8), and camera_info (to check image sizes);
-publishes silhouette (mono8, 0/255), skin_ellipses, labelled_contour and, with publish_overlay,
-features_overlay, each with the source image's header unchanged. Bad input (undecodable or wrongly
+publishes silhouette/compressed (PNG, mono8 0/255), skin_ellipses, labelled_contour and, with
+publish_overlay, features_overlay, each with the source image's header unchanged. The raw silhouette
+(sensor_msgs/Image mono8, 2 MB at 1080p) is made and published only while something subscribes to it. Bad input (undecodable or wrongly
 encoded images, sizes that disagree with camera_info, no person) is logged once per cause and
 answered with empty features carrying a status; the node keeps running.
 """
+import numpy as np
 from mvpose_msgs.msg import LabelledContour, SkinEllipseArray
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 from sensor_msgs.msg import CameraInfo, CompressedImage, Image
 
-from mvpose_nodes.ros.conversions import ImageError, colour_image, empty_feature_messages, feature_messages, rgb_image
+from mvpose_nodes.ros.conversions import (ImageError, colour_image, empty_feature_messages, feature_messages, mono_image,
+                                          png_mono, rgb_image)
 from mvpose_nodes.ros.helpers import LATCHED, ReportOnce, camera_of_namespace, run_node
 from mvpose_nodes.ros.params import (CAMERA_FEATURES, ParameterError, changed_values, declare_parameters,
                                      default_skin_model_path, feature_settings_from)
@@ -34,6 +37,8 @@ class CameraFeaturesNode(ReportOnce, Node):
         self.add_on_set_parameters_callback(self.on_set_parameters)
         self.camera_info = None
         self.silhouette_publisher = self.create_publisher(Image, 'silhouette', STREAM_DEPTH)
+        self.compressed_silhouette_publisher = self.create_publisher(CompressedImage, 'silhouette/compressed',
+                                                                     STREAM_DEPTH)
         self.ellipses_publisher = self.create_publisher(SkinEllipseArray, 'skin_ellipses', STREAM_DEPTH)
         self.contour_publisher = self.create_publisher(LabelledContour, 'labelled_contour', STREAM_DEPTH)
         self.overlay_publisher = self.create_publisher(Image, 'features_overlay', STREAM_DEPTH)
@@ -74,7 +79,8 @@ class CameraFeaturesNode(ReportOnce, Node):
 
     def reject(self, header, width, height, cause, reason):
         self.report_once(cause, f'{reason}; publishing empty features with STATUS_BAD_INPUT')
-        self.publish(*empty_feature_messages(header, width, height, LabelledContour.STATUS_BAD_INPUT, reason))
+        self.publish(np.zeros((max(height, 0), max(width, 0)), bool), header,
+                     *empty_feature_messages(header, LabelledContour.STATUS_BAD_INPUT, reason))
 
     def process(self, rgb, header, topic):
         height, width = rgb.shape[:2]
@@ -95,12 +101,16 @@ class CameraFeaturesNode(ReportOnce, Node):
         if not features.person:
             self.report_once('no person', f'{topic}: no person found (publishing empty features, '
                                           'STATUS_NO_PERSON; logged once)')
-        self.publish(*feature_messages(features, header))
+        self.publish(features.silhouette, header, *feature_messages(features, header))
         if self.values['publish_overlay']:
             self.overlay_publisher.publish(rgb_image(draw_features(rgb, features), header))
 
-    def publish(self, silhouette, ellipses, contour):
-        self.silhouette_publisher.publish(silhouette)
+    def publish(self, silhouette, header, ellipses, contour):
+        """silhouette: (H, W) bool, the person's pixels."""
+        mask = silhouette.astype(np.uint8) * 255
+        self.compressed_silhouette_publisher.publish(png_mono(mask, header))
+        if self.silhouette_publisher.get_subscription_count():
+            self.silhouette_publisher.publish(mono_image(mask, header))
         self.ellipses_publisher.publish(ellipses)
         self.contour_publisher.publish(contour)
 

@@ -1,8 +1,7 @@
 """skeleton_fitter: the cameras' features -> the fitted 15-joint skeleton (paper 000 Sec. 4–6, paper 004).
 
-For each configured camera it subscribes /cam<K>/silhouette, /cam<K>/skin_ellipses and
-/cam<K>/labelled_contour (through an approximate-time synchroniser: fitting/sync.py) and the camera's
-camera_info and camera_pose. Every synchronised frame set is fitted (ros/frame_set_fitting.py) and published as
+For each configured camera it subscribes /cam<K>/skin_ellipses and /cam<K>/labelled_contour (through
+an approximate-time synchroniser: fitting/sync.py) and the camera's camera_info and camera_pose. Every synchronised frame set is fitted (ros/frame_set_fitting.py) and published as
 /mvpose/skeleton (mvpose_msgs/Skeleton: joint poses, the 29 parameters, the six stages), the 29
 parameters as /mvpose/joint_states (sensor_msgs/JointState), and /mvpose/skeleton_markers
 (visualization_msgs/MarkerArray in `world`, for RViz and Foxglove). A camera whose features stop is
@@ -10,7 +9,7 @@ left out after camera_timeout (status DEGRADED) and rejoins when they come back.
 than two cameras seeing the person gets STATUS_LOST, repeating the last fitted pose.
 """
 from mvpose_msgs.msg import LabelledContour, Skeleton, SkinEllipseArray
-from sensor_msgs.msg import Image, JointState
+from sensor_msgs.msg import JointState
 from visualization_msgs.msg import MarkerArray
 
 from mvpose_nodes.ros.conversions import joint_state, joints_from_skeleton, skeleton_markers
@@ -19,7 +18,8 @@ from mvpose_nodes.ros.helpers import LATCHED, run_node
 from mvpose_nodes.ros.multi_camera import MultiCameraNode
 from mvpose_nodes.ros.params import SKELETON_FITTER, fitter_settings_from
 
-FEATURES = {'silhouette': Image, 'skin_ellipses': SkinEllipseArray, 'labelled_contour': LabelledContour}
+# The silhouette is not an input: the labelled contour is its outline, and all the fit reads of it.
+FEATURES = {'skin_ellipses': SkinEllipseArray, 'labelled_contour': LabelledContour}
 
 
 class SkeletonFitterNode(MultiCameraNode):

@@ -10,6 +10,7 @@ from geometry_msgs.msg import Pose, PoseStamped
 from mvpose_msgs.msg import (FitStage, Keypoint2D, LabelledContour, MarkerTracks, Skeleton, SkinEllipse,
                              SkinEllipseArray)
 from sensor_msgs.msg import CameraInfo, CompressedImage, Image
+from std_msgs.msg import Header
 
 from mvpose_nodes.body.model import JOINT_NAMES, joint_orientations
 from mvpose_nodes.body.camera import Camera
@@ -83,10 +84,18 @@ def compressed_image(rgb, camera_number, nanoseconds, image_format='jpeg', jpeg_
 
 def compressed_labels(labels, camera_number, nanoseconds):
     """CompressedImage (lossless PNG, mono8) of a ground-truth label mask (H, W) uint8."""
-    ok, data = cv2.imencode('.png', labels, [cv2.IMWRITE_PNG_COMPRESSION, 3])
-    message = CompressedImage(format='mono8; png compressed mono8', data=data.tobytes())
+    message = png_mono(labels, Header(), compression=3)
     set_stamp(message.header, nanoseconds, optical_frame(camera_number))
     return message
+
+
+def png_mono(mask, header, compression=None):
+    """CompressedImage, format 'mono8; png compressed mono8' (image_transport's), of a (H, W) uint8 array
+    with `header`: lossless, and a 0/255 1080p silhouette is 5–10 kB instead of 2 MB (about 5 ms to encode
+    at OpenCV's default compression)."""
+    parameters = [] if compression is None else [cv2.IMWRITE_PNG_COMPRESSION, compression]
+    ok, data = cv2.imencode('.png', np.ascontiguousarray(mask, np.uint8), parameters)
+    return CompressedImage(header=header, format='mono8; png compressed mono8', data=data.tobytes())
 
 
 def image_from_compressed(message):
@@ -170,8 +179,8 @@ def keypoint_message(name, keypoint):
 
 
 def feature_messages(features, header, status_message=''):
-    """(silhouette Image, SkinEllipseArray, LabelledContour) of features.Features, with `header`."""
-    silhouette = mono_image(features.silhouette.astype(np.uint8) * 255, header)
+    """(SkinEllipseArray, LabelledContour) of features.Features, with `header` (the silhouette: png_mono
+    and mono_image of features.silhouette as 0/255)."""
     status = SkinEllipseArray.STATUS_OK if features.person else SkinEllipseArray.STATUS_NO_PERSON
     message = status_message or ('' if features.person else 'no person in the image')
     ellipses = SkinEllipseArray(header=header, status=status, status_message=message,
@@ -193,13 +202,13 @@ def feature_messages(features, header, status_message=''):
         contour.y = features.contour.points[:, 1].astype(np.uint16).tolist()
         contour.labels = features.contour.labels.tobytes()
         contour.sides = features.contour.sides.tobytes()
-    return silhouette, ellipses, contour
+    return ellipses, contour
 
 
-def empty_feature_messages(header, width, height, status, reason):
-    """Feature messages that say why there are none (status STATUS_NO_PERSON or STATUS_BAD_INPUT)."""
-    silhouette = mono_image(np.zeros((max(height, 0), max(width, 0)), np.uint8), header)
-    return (silhouette, SkinEllipseArray(header=header, status=status, status_message=reason),
+def empty_feature_messages(header, status, reason):
+    """(SkinEllipseArray, LabelledContour) that say why there are no features (status STATUS_NO_PERSON or
+    STATUS_BAD_INPUT)."""
+    return (SkinEllipseArray(header=header, status=status, status_message=reason),
             LabelledContour(header=header, status=status, status_message=reason))
 
 
