@@ -6,7 +6,7 @@ import re
 
 import pytest
 
-from mvpose_nodes.app import bench
+from mvpose_nodes.app.reports import benchmark as bench
 
 pytestmark = pytest.mark.pure
 
@@ -84,3 +84,32 @@ def test_table_reports_rates_latencies_and_nodes():
     assert 'end-to-end / decode-only = 0.018' in table
     assert re.search(r'fit\s+200\.0\s+200\.0', table)
     assert re.search(r'skeleton_fitter\s+1\.5\s+75\s+200', table)
+
+
+def test_cpu_split_from_two_diagnostics_statuses():
+    before = {'process': 10.0, 'thread/executor': 4.0, 'thread/fitting': 3.0, 'stage/sync': 0.5, 'stage/fit': 2.0}
+    after = {'process': 20.0, 'thread/executor': 6.0, 'thread/fitting': 9.0, 'stage/sync': 1.0, 'stage/fit': 7.0,
+             'stage/publish': 0.25}                       # a stage first timed during the run
+    split = bench.cpu_split(before, after)
+    assert split == pytest.approx({'sync': 0.5, 'fit': 5.0, 'publish': 0.25,
+                                   'rclpy (take, deserialise, executor)': 8.0 - 5.75,   # threads 2 + 6
+                                   'DDS and other threads': 10.0 - 8.0, 'total': 10.0})
+
+
+def test_backlog_growth_compares_the_first_and_last_quarter():
+    sent = {stamp: float(stamp) for stamp in range(8)}
+    steady = {stamp: (stamp + 0.1, 0.05) for stamp in range(8)}
+    growing = {stamp: (stamp + 0.1 * (stamp + 1), 0.05) for stamp in range(8)}
+    assert bench.backlog_growth(sent, steady) == pytest.approx((100.0, 100.0))
+    assert bench.backlog_growth(sent, growing) == pytest.approx((150.0, 750.0))   # medians of (100, 200), (700, 800)
+
+
+def test_open_loop_table_reports_share_fitted_skips_and_error():
+    sent = {1: 0.0, 2: 0.04, 3: 0.08, 4: 0.12}
+    result = bench.BenchResult('bags/x', (3, 5, 7), 1920, 1080, 2, 4, rate=1.0, sent=sent,
+                               skeletons={1: (0.1, 0.05), 3: (0.2, 0.05)}, skipped=2, errors_mm={1: 30.0, 3: 40.0},
+                               decode_ms=[4.0] * 12, split={'skeleton_fitter': {'fit': 0.2, 'total': 0.4}})
+    table = bench.format_table(result)
+    assert "open loop at 1× the bag's speed: 2 of 4 frame sets fitted (50 %), 2 skipped by the fitter as stale" in table
+    assert 'mean joint error of the fitted frame sets: 35 mm (2 with ground truth)' in table
+    assert re.search(r'skeleton_fitter\s+fit 50\.0\s+total 100\.0', table)      # ms per frame set sent

@@ -123,3 +123,16 @@ def test_compiled_nelder_mead_takes_scipys_steps(walk_frame, stage):
                                            SAMPLES, flags)
         assert evaluations == reference.nfev and (budget > 100 or evaluations == budget)
         assert np.array_equal(x, reference.x) and cost == reference.fun
+
+
+def test_nearest_capsules_equal_the_minimum_of_the_residuals():
+    from mvpose_nodes.fitting.compiled import nearest_capsules
+    from mvpose_nodes.fitting.objective import capsule_residuals
+    rng = np.random.default_rng(3)
+    points = rng.uniform(0, 500, size=(300, 2))
+    starts, ends = rng.uniform(0, 500, size=(14, 2)), rng.uniform(0, 500, size=(14, 2))
+    radii, terminal = rng.uniform(0, 30, size=14), rng.random(14) < 0.4
+    residuals = capsule_residuals(points, starts, ends, radii, terminal)
+    nearest, found = nearest_capsules(points, starts, ends, radii, terminal)
+    assert np.array_equal(nearest, residuals.argmin(axis=1))
+    assert np.allclose(found, residuals.min(axis=1), rtol=1e-12, atol=1e-9)

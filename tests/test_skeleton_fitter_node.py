@@ -115,9 +115,11 @@ def test_skeleton_fitter_node_survives_nan_calibration_and_malformed_contours(ba
 
 def test_features_that_come_before_the_calibration_wait_for_it(rendered_features, background, ros_context):
     """Issue 13: no frame set is lost at start-up because calibration came after the first images: the
-    fitter holds the frame sets (calibration_wait) and fits them, in order, once it comes."""
+    fitter holds the frame sets (calibration_wait) and fits them, in order, once it comes. With every set
+    fitted (pending_frame_sets 0): by default the burst of held sets is real time's backlog, of which the
+    newest is fitted (test_real_time.py)."""
     fitter = background('run', 'skeleton_fitter', '--ros-args', '-p', f'cameras:={list(CAMERAS)}',
-                        '-p', 'calibration_wait:=30.0')
+                        '-p', 'calibration_wait:=30.0', '-p', 'pending_frame_sets:=0')
     node = rclpy.create_node('early_features')
     received = []
     node.create_subscription(Skeleton, '/mvpose/skeleton', received.append, LATCHED)

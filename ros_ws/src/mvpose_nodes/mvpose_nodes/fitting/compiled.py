@@ -10,17 +10,17 @@ The frame's evidence is packed once per frame (`pack_frame`: cameras, silhouette
 maps, flattened into one buffer each) and a stage's once per search (`pack_stage`: its outline points,
 keypoint targets, bones, priors), so an evaluation passes only the trial values. Compiled functions are
 cached on disk (numba's cache=True; ./mvpose sets NUMBA_CACHE_DIR to .venv/numba-cache), so only the
-first run on a machine compiles (about 10 s); `warm_up()` does that at a node's start, not in its first fit.
+first run on a machine compiles (about 20 s; fitter.warm_up does it at a node's start, not in its first
+fit). They release the GIL (nogil), so the node's executor thread takes messages while a search runs.
 Units and axes as in objective.py: pixels x right, y down; metres; radians.
 """
 from typing import NamedTuple
 
 import numpy as np
 from numba import njit
-from numba.typed import List
 
 from mvpose_nodes.body.kinematics import BONES, LENGTH_FRACTIONS, _ANGLE_INDEX, _CHAIN, _TORSO_POSITION
-from mvpose_nodes.body.model import JOINT_INDEX, JOINT_NAMES, LABEL_HEAD, LABEL_LEFT_LEG, LABEL_RIGHT_LEG, LABEL_TORSO
+from mvpose_nodes.body.model import JOINT_INDEX, LABEL_HEAD, LABEL_LEFT_LEG, LABEL_RIGHT_LEG, LABEL_TORSO
 from mvpose_nodes.fitting.objective import BILINEAR_STEPS, INSIDE_SAMPLES, OUTLINE_STEP, SEGMENT_POINTS, _fractions
 from mvpose_nodes.vision.contour import SIDE_A, SIDE_B
 
@@ -45,7 +45,7 @@ def bone_length_array(lengths):
     return np.array([lengths[bone.length] for bone in BONES], np.float64)
 
 
-@njit(cache=True, error_model='numpy')
+@njit(cache=True, nogil=True, error_model='numpy')
 def _euler(rx, ry, rz):
     """kinematics.euler_matrix: Rz(rz)·Ry(ry)·Rx(rx) (paper 004 Eq. 2), 3×3."""
     cx, sx, cy, sy, cz, sz = np.cos(rx), np.sin(rx), np.cos(ry), np.sin(ry), np.cos(rz), np.sin(rz)
@@ -56,7 +56,7 @@ def _euler(rx, ry, rz):
     return out
 
 
-@njit(cache=True, error_model='numpy')
+@njit(cache=True, nogil=True, error_model='numpy')
 def forward_joints(parameters, bone_lengths):
     """Joints (15, 3) [m] of 29 parameters (Table 1 order) and bone lengths (14,) [m]: the joints of
     kinematics.forward_kinematics (without its bone frames)."""
@@ -77,25 +77,26 @@ def forward_joints(parameters, bone_lengths):
 
 
 class FramePack(NamedTuple):
-    """One frame's views for the compiled objective (V views, in the order of the fitter's view list);
-    the maps are the views' own arrays, not copies.
+    """One frame's views for the compiled objective (V views, in the order of the fitter's view list).
 
     K, R: (V, 3, 3); t: (V, 3); D: (V, 5) plumb_bob (body.camera.Camera). Silhouette maps
-    (objective.Outline.outside): has_outline (V,) bool, outside: per view its map flattened (float32),
-    outside_shape (V, 2) (height, width), outside_origin (V, 2) (x0, y0) [px]. Boundary maps
-    (objective.BoundaryDistances) of MAP_LABELS: slot (V, 4) bool (the part has both sides), boundary:
-    per view its BoundaryDistances.buffer, boundary_at (V, 4, 2) each side's map's offset in it,
+    (objective.Outline.outside): has_outline (V,) bool, outside (N,) float32 the views' maps flattened one
+    after the other, outside_at (V,) each one's first index, outside_shape (V, 2) (height, width),
+    outside_origin (V, 2) (x0, y0) [px]. Boundary maps (objective.BoundaryDistances) of MAP_LABELS: slot
+    (V, 4) bool (the part has both sides), boundary (M,) float32 the views' BoundaryDistances.buffer (one
+    after the other, unless they share one), boundary_at (V, 4, 2) each side's map's first index in it,
     boundary_shape, boundary_origin (V, 4, 2), boundary_width (V, 4) [px]."""
     K: np.ndarray
     R: np.ndarray
     t: np.ndarray
     D: np.ndarray
     has_outline: np.ndarray
-    outside: List
+    outside: np.ndarray
+    outside_at: np.ndarray
     outside_shape: np.ndarray
     outside_origin: np.ndarray
     slot: np.ndarray
-    boundary: List
+    boundary: np.ndarray
     boundary_at: np.ndarray
     boundary_shape: np.ndarray
     boundary_origin: np.ndarray
@@ -132,34 +133,47 @@ class StagePack(NamedTuple):
     weights: np.ndarray
 
 
+def _joined(buffers):
+    """One float32 array of the distinct arrays in `buffers` (None: none), and each one's start in it: the
+    array itself, without a copy, when they are all the same."""
+    distinct = {id(b): b for b in buffers if b is not None}
+    starts, total = {}, 0
+    for key, buffer in distinct.items():
+        starts[key] = total
+        total += buffer.size
+    joined = (next(iter(distinct.values())).ravel() if len(distinct) == 1 else
+              np.concatenate([b.ravel() for b in distinct.values()]) if distinct else np.zeros(0, np.float32))
+    return joined, [starts[id(b)] if b is not None else 0 for b in buffers]
+
+
 def pack_frame(views):
     """The FramePack of a list of fitter.View."""
     count, labels = len(views), len(MAP_LABELS)
-    outside, boundary = List(), List()
+    outside, outside_at = _joined([v.outline.outside if v.outline is not None else None for v in views])
+    boundary, boundary_start = _joined([v.distances.buffer if v.distances is not None else None for v in views])
     slot, width = np.zeros((count, labels), np.bool_), np.zeros((count, labels))
     at, shape, origin = (np.zeros((count, labels, 2), dtype) for dtype in (np.int64, np.int64, np.float64))
     for v, view in enumerate(views):
-        outside.append(view.outline.outside.ravel() if view.outline is not None else np.zeros(0, np.float32))
         distances = view.distances
-        boundary.append(distances.buffer if distances is not None else np.zeros(0, np.float32))
         for k, label in enumerate(MAP_LABELS):
             if distances is None or label not in distances.widths:
                 continue
             slot[v, k], width[v, k], origin[v, k] = True, distances.widths[label], distances.origins[label]
             shape[v, k] = distances.maps[(label, SIDE_A)].shape
-            at[v, k] = distances.offsets[(label, SIDE_A)], distances.offsets[(label, SIDE_B)]
+            at[v, k] = (boundary_start[v] + distances.offsets[(label, SIDE_A)],
+                        boundary_start[v] + distances.offsets[(label, SIDE_B)])
     return FramePack(
         np.array([v.camera.K for v in views], np.float64).reshape(count, 3, 3),
         np.array([v.camera.R for v in views], np.float64).reshape(count, 3, 3),
         np.array([v.camera.t for v in views], np.float64).reshape(count, 3),
         np.array([v.camera.D for v in views], np.float64).reshape(count, 5),
-        np.array([v.outline is not None for v in views], np.bool_), outside,
+        np.array([v.outline is not None for v in views], np.bool_), outside, np.array(outside_at, np.int64),
         np.array([v.outline.outside.shape if v.outline is not None else (0, 0) for v in views], np.int64).reshape(count, 2),
         np.array([v.outline.origin if v.outline is not None else (0, 0) for v in views], np.float64).reshape(count, 2),
         slot, boundary, at, shape, origin, width)
 
 
-@njit(cache=True, error_model='numpy')
+@njit(cache=True, nogil=True, error_model='numpy')
 def _project(frame, view, joints):
     """body.camera.Camera.project of joints (J, 3) in view `view`: pixels (J, 2), depths (J,)."""
     K, R, t, D = frame.K[view], frame.R[view], frame.t[view], frame.D[view]
@@ -180,7 +194,7 @@ def _project(frame, view, joints):
     return pixels, depth
 
 
-@njit(cache=True, error_model='numpy')
+@njit(cache=True, nogil=True, error_model='numpy')
 def _bilinear(buffer, at, height, width, x, y):
     """objective.bilinear of one (height, width) map, flattened in `buffer` from index `at`, at a point
     (x, y) in the map's pixels: bilinear inside, the nearest edge value plus the distance outside."""
@@ -198,7 +212,7 @@ def _bilinear(buffer, at, height, width, x, y):
     return top + fy * (bottom - top) + np.hypot(x - cx, y - cy)
 
 
-@njit(cache=True, error_model='numpy')
+@njit(cache=True, nogil=True, error_model='numpy')
 def stage_objective(values, stage, frame, bone_lengths, fractions, samples, used):
     """The stage's objective (StageSearch.search's cost: stage_cost plus the priors) at `values` (n,) of
     its parameters. stage: StagePack; frame: FramePack; bone_lengths (14,) [m]; fractions
@@ -242,7 +256,7 @@ def stage_objective(values, stage, frame, bone_lengths, fractions, samples, used
                     py = np.rint(starts[k, 1] + samples[s] * (ends[k, 1] - starts[k, 1]) - frame.outside_origin[v, 1])
                     column = int(min(max(px, 0.0), width - 1.0))
                     row = int(min(max(py, 0.0), height - 1.0))
-                    d = np.float64(frame.outside[v][row * width + column])
+                    d = np.float64(frame.outside[frame.outside_at[v] + row * width + column])
                     inside += d * d
             total += w[2] * inside
             for p in range(len(stage.points)):
@@ -274,8 +288,8 @@ def stage_objective(values, stage, frame, bone_lengths, fractions, samples, used
             for s in range(len(fractions)):
                 x = pixels[a, 0] + fractions[s] * (pixels[b, 0] - pixels[a, 0]) - ox
                 y = pixels[a, 1] + fractions[s] * (pixels[b, 1] - pixels[a, 1]) - oy
-                d1 = _bilinear(frame.boundary[v], at_a, height, width, x, y)
-                d2 = _bilinear(frame.boundary[v], at_b, height, width, x, y)
+                d1 = _bilinear(frame.boundary, at_a, height, width, x, y)
+                d2 = _bilinear(frame.boundary, at_b, height, width, x, y)
                 sum1 += d1
                 sum2 += d2
                 enclosure += max(d1 + d2 - frame.boundary_width[v, slot], 0.0)
@@ -295,6 +309,29 @@ def stage_objective(values, stage, frame, bone_lengths, fractions, samples, used
 def fractions_arrays():
     """(SEGMENT_POINTS,), (INSIDE_SAMPLES,) float64: objective._fractions, the S_j and inside samples' positions."""
     return np.ascontiguousarray(_fractions(SEGMENT_POINTS)[:, 0]), np.ascontiguousarray(_fractions(INSIDE_SAMPLES)[:, 0])
+
+
+@njit(cache=True, nogil=True, error_model='numpy')
+def nearest_capsules(points, starts, ends, radii, terminal):
+    """For each point (M, 2) [px] its nearest of K projected capsules and the residual there, as the
+    minimum over objective.capsule_residuals(points, starts, ends, radii, terminal) (its argument shapes
+    (K, 2), (K,)): (indices (M,) int64, residuals (M,) [px]; inf where every capsule is terminal and
+    ends before the point)."""
+    count = points.shape[0]
+    nearest, residual = np.zeros(count, np.int64), np.full(count, np.inf)
+    for p in range(count):
+        for k in range(starts.shape[0]):
+            ax, ay = ends[k, 0] - starts[k, 0], ends[k, 1] - starts[k, 1]
+            ox, oy = points[p, 0] - starts[k, 0], points[p, 1] - starts[k, 1]
+            along = (ox * ax + oy * ay) / (ax * ax + ay * ay + 1e-9)
+            if along > 1.0 and terminal[k]:
+                continue
+            clamped = min(max(along, 0.0), 1.0)
+            gx, gy = ox - clamped * ax, oy - clamped * ay
+            distance = np.sqrt(gx * gx + gy * gy) - radii[k]
+            if distance < residual[p]:
+                nearest[p], residual[p] = k, distance
+    return nearest, residual
 
 
 # Nelder–Mead (Lagarias et al. 1998) with paper 000's coefficients (Eq. 7): reflection ρ = 1, expansion
@@ -391,3 +428,35 @@ def nelder_mead(simplex, xatol, fatol, maxfev, stage, frame, bone_lengths, fract
         _sort_simplex(sim, costs)
     _sort_simplex(sim, costs)
     return sim[0].copy(), costs[0], calls
+
+
+# Entry points from Python, with the packs' fields as separate arguments: numba types top-level arrays in C,
+# but the arrays inside a tuple in Python, at about 10 µs each, which cost more than a stage objective.
+@njit(cache=True, nogil=True, error_model='numpy')
+def search(simplex, xatol, fatol, maxfev, bone_lengths, fractions, samples, used,
+           indices, base, start, steps, low, high, capsules, capsule_radius, capsule_terminal, assigned,
+           points, point_view, bones, bone_slot, keypoint_view, keypoint_joint, keypoint_xy, keypoint_weight,
+           weights, K, R, t, D, has_outline, outside, outside_at, outside_shape, outside_origin, slot, boundary,
+           boundary_at, boundary_shape, boundary_origin, boundary_width):
+    """nelder_mead with the StagePack and FramePack given field by field: search(..., *stage, *frame)."""
+    stage = StagePack(indices, base, start, steps, low, high, capsules, capsule_radius, capsule_terminal,
+                      assigned, points, point_view, bones, bone_slot, keypoint_view, keypoint_joint, keypoint_xy,
+                      keypoint_weight, weights)
+    frame = FramePack(K, R, t, D, has_outline, outside, outside_at, outside_shape, outside_origin, slot, boundary,
+                      boundary_at, boundary_shape, boundary_origin, boundary_width)
+    return nelder_mead(simplex, xatol, fatol, maxfev, stage, frame, bone_lengths, fractions, samples, used)
+
+
+@njit(cache=True, nogil=True, error_model='numpy')
+def objective(values, bone_lengths, fractions, samples, used,
+              indices, base, start, steps, low, high, capsules, capsule_radius, capsule_terminal, assigned,
+              points, point_view, bones, bone_slot, keypoint_view, keypoint_joint, keypoint_xy, keypoint_weight,
+              weights, K, R, t, D, has_outline, outside, outside_at, outside_shape, outside_origin, slot, boundary,
+              boundary_at, boundary_shape, boundary_origin, boundary_width):
+    """stage_objective with the StagePack and FramePack given field by field: objective(..., *stage, *frame)."""
+    stage = StagePack(indices, base, start, steps, low, high, capsules, capsule_radius, capsule_terminal,
+                      assigned, points, point_view, bones, bone_slot, keypoint_view, keypoint_joint, keypoint_xy,
+                      keypoint_weight, weights)
+    frame = FramePack(K, R, t, D, has_outline, outside, outside_at, outside_shape, outside_origin, slot, boundary,
+                      boundary_at, boundary_shape, boundary_origin, boundary_width)
+    return stage_objective(values, stage, frame, bone_lengths, fractions, samples, used)

@@ -17,16 +17,18 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from mvpose_nodes.body.kinematics import forward_kinematics, inverse_kinematics
-from mvpose_nodes.body.model import JOINT_INDEX, STAGE_NAMES
-from mvpose_nodes.fitting.compiled import MAP_LABELS, pack_frame
+from mvpose_nodes.body.camera import intrinsics, look_at
+from mvpose_nodes.body.kinematics import bone_lengths, forward_kinematics, inverse_kinematics
+from mvpose_nodes.body.model import JOINT_INDEX, LABEL_TORSO, STAGE_NAMES
+from mvpose_nodes.fitting.compiled import MAP_LABELS, nearest_capsules, pack_frame
 from mvpose_nodes.fitting.initialisation import (PAIRED_LIMBS, completed_joints, labelled_joints, person_lengths,
                                                  triangulated_joints)
 from mvpose_nodes.fitting.limb_sides import (FacingWatch, LimbTracks, exchange, face_votes, facing_travel,
                                              foot_evidence, mirrored_joints, oriented_view)
-from mvpose_nodes.fitting.objective import boundary_distances, capsule_residuals, outline_of
+from mvpose_nodes.fitting.objective import boundary_distances, outline_of
 from mvpose_nodes.fitting.settings import FitterSettings
 from mvpose_nodes.fitting.stage_search import CAPSULE_ENDS, StageSearch, stage_indices
+from mvpose_nodes.vision.contour import SIDE_A, SIDE_B, ContourLabels
 
 TORSO_POSITION = stage_indices('torso')[:3]   # torso_x, torso_y, torso_z: the root's position [m]
 LOST_MARGIN = 0.25  # [m] an outline point this far from every bone is not explained by the skeleton
@@ -190,9 +192,9 @@ def unexplained_share(views, joints):
         if view.outline is None or not len(view.outline.points):
             continue
         pixels, depths = view.camera.project(joints)
-        residuals = capsule_residuals(view.outline.points, pixels[CAPSULE_ENDS[:, 0]], pixels[CAPSULE_ENDS[:, 1]],
-                                      np.zeros(len(CAPSULE_ENDS)), np.zeros(len(CAPSULE_ENDS), bool))
-        metres = residuals.min(axis=1) * depths[JOINT_INDEX['pelvis']] / view.camera.K[0, 0]
+        _, residuals = nearest_capsules(view.outline.points, pixels[CAPSULE_ENDS[:, 0]], pixels[CAPSULE_ENDS[:, 1]],
+                                        np.zeros(len(CAPSULE_ENDS)), np.zeros(len(CAPSULE_ENDS), np.bool_))
+        metres = residuals * depths[JOINT_INDEX['pelvis']] / view.camera.K[0, 0]
         shares.append(float(np.mean(metres > LOST_MARGIN)))
     return float(np.median(shares)) if shares else 0.0
 
@@ -207,3 +209,20 @@ def view_from_features(camera, keypoints, contour, frontness=None, skin=None):
         outline = outline_of(contour.points)
     skin = None if skin is None else np.asarray(skin, float).reshape(-1, 3)
     return View(camera, distances, keypoints, frontness, outline, skin)
+
+
+def warm_up():
+    """Run the compiled search once on a made-up frame (a block seen by two cameras, torso stage), so that
+    numba loads it from its disk cache, or compiles it on a machine's first run (about 10 s), now rather
+    than in the first fit. The nodes call this while they start."""
+    lengths = bone_lengths(1.75)
+    block = np.array([(x, y) for x in range(40, 61) for y in (20, 80)] + [(x, y) for y in range(21, 80) for x in (40, 60)])
+    contour = ContourLabels(block.astype(np.int32), np.full(len(block), LABEL_TORSO, np.uint8),
+                            np.where(block[:, 0] < 50, SIDE_A, SIDE_B).astype(np.uint8))
+    views = [view_from_features(look_at(number, (3.0 * side, -3.0, 1.0), (0.0, 0.0, 1.0), intrinsics(100.0, 100, 100),
+                                        100, 100), {'root': (50.0, 50.0, 1.0)}, contour)
+             for number, side in ((1, -1), (2, 1))]
+    parameters = inverse_kinematics(forward_kinematics(np.r_[0.0, 0.0, 1.0, np.zeros(26)], lengths)[0])
+    stages = StageSearch(FitterSettings(), lengths)
+    stages.new_frame()
+    stages.search('torso', parameters, views, stages.outline_assignment('torso', parameters, views), pack_frame(views))

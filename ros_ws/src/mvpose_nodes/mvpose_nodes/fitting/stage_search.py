@@ -26,9 +26,9 @@ import numpy as np
 from mvpose_nodes.body.kinematics import BONE_INDEX, BONES, forward_kinematics
 from mvpose_nodes.body.model import (JOINT_INDEX, LABEL_HEAD, LABEL_LEFT_LEG, LABEL_RIGHT_LEG, LABEL_TORSO,
                                      PARAMETER_INDEX)
-from mvpose_nodes.fitting.compiled import (LABEL_SLOT, StagePack, bone_length_array, fractions_arrays, nelder_mead,
-                                           stage_objective)
-from mvpose_nodes.fitting.objective import (CAPSULE_RADII, TERMINAL_BONES, capsule_residuals, inside_cost, limb_cost,
+from mvpose_nodes.fitting.compiled import (LABEL_SLOT, StagePack, bone_length_array, fractions_arrays, nearest_capsules,
+                                           objective, search)
+from mvpose_nodes.fitting.objective import (CAPSULE_RADII, TERMINAL_BONES, inside_cost, limb_cost,
                                             outline_cost)
 
 JOINT_LIMITS = {'left_shin_rx': (-2.6, 0.05), 'right_shin_rx': (-2.6, 0.05),     # knees bend backwards,
@@ -128,10 +128,10 @@ class StageSearch:
         indices = stage_indices(stage)
         pack = self.stage_pack(stage, parameters, views, assigned, priors=True)
         start = parameters[indices]
-        found, _, evaluations = nelder_mead(
+        found, _, evaluations = search(
             np.vstack([start, start + np.diag(pack.steps)]), settings.simplex_tolerance, np.inf,
-            settings.max_evaluations_per_parameter * len(indices), pack, frame, self.bone_lengths, FRACTIONS, SAMPLES,
-            np.zeros(len(views), np.bool_))
+            settings.max_evaluations_per_parameter * len(indices), self.bone_lengths, FRACTIONS, SAMPLES,
+            np.zeros(len(views), np.bool_), *pack, *frame)
         fitted = parameters.copy()
         fitted[indices] = found
         final, used = self.compiled_cost(stage, fitted, views, assigned, frame)
@@ -142,7 +142,7 @@ class StageSearch:
         contributed)."""
         pack = self.stage_pack(stage, parameters, views, assigned, priors=False)
         used = np.zeros(len(views), np.bool_)
-        cost = stage_objective(parameters[pack.indices], pack, frame, self.bone_lengths, FRACTIONS, SAMPLES, used)
+        cost = objective(parameters[pack.indices], self.bone_lengths, FRACTIONS, SAMPLES, used, *pack, *frame)
         return float(cost), np.flatnonzero(used).tolist()
 
     def stage_pack(self, stage, parameters, views, assigned, priors):
@@ -188,11 +188,9 @@ class StageSearch:
             if view.outline is None:
                 assigned.append(None)
                 continue
-            residuals = capsule_residuals(view.outline.points, *projected_capsules(view, *view.camera.project(joints)),
-                                          CAPSULE_TERMINAL)
-            nearest = residuals.argmin(axis=1)
-            keep = np.isin(nearest, mine) & (np.abs(residuals[np.arange(len(nearest)), nearest])
-                                             < self.settings.outline_gate)
+            nearest, residuals = nearest_capsules(view.outline.points, *projected_capsules(view, *view.camera.project(joints)),
+                                                  CAPSULE_TERMINAL)
+            keep = np.isin(nearest, mine) & (np.abs(residuals) < self.settings.outline_gate)
             assigned.append(view.outline.points[keep])
         return assigned
 

@@ -21,10 +21,15 @@ Beyond ROS: channels form groups (a camera's feature topics). A group whose newe
 name the missing groups) until it is heard again. The input clock is the newest stamp matched, not wall time,
 so a silent group is noticed only while others keep producing, and the result is deterministic in tests and
 the same when replaying a bag at any speed.
+
+HeldSets keeps sets back until their cameras' calibration is in; PendingSets hands the newest sets to a
+worker that is slower than the input (PendingSets: beyond its depth, the oldest are skipped and counted).
 """
 import bisect
+import collections
 import heapq
 import itertools
+import threading
 from dataclasses import dataclass
 
 
@@ -168,3 +173,36 @@ class HeldSets:
                 break
             released.append(self.held.pop(0)[1])
         return released
+
+
+class PendingSets:
+    """The frame sets waiting for a slower worker (the fitter, in its own thread): at most `depth` (0: no
+    limit). put() adds one; when that makes more than `depth`, the oldest waiting is skipped (and counted),
+    so with depth 1 the worker always gets the newest set and no backlog builds up, whatever the input
+    rate (real time). take() gets the oldest one still waiting."""
+
+    def __init__(self, depth=1):
+        self.depth = depth
+        self._condition = threading.Condition()
+        self._waiting = collections.deque()
+        self.skipped = 0      # sets dropped unfitted because newer ones came
+        self.closed = False
+
+    def put(self, item):
+        with self._condition:
+            self._waiting.append(item)
+            while self.depth and len(self._waiting) > self.depth:
+                self._waiting.popleft()
+                self.skipped += 1
+            self._condition.notify()
+
+    def take(self, timeout):
+        """The oldest waiting item, or None after `timeout` [s] without one, or once closed."""
+        with self._condition:
+            self._condition.wait_for(lambda: self._waiting or self.closed, timeout)
+            return self._waiting.popleft() if self._waiting and not self.closed else None
+
+    def close(self):
+        with self._condition:
+            self.closed = True
+            self._condition.notify_all()

@@ -3,9 +3,10 @@
 Started once per camera in its namespace, which gives the camera number:
     ./mvpose run camera_features --ros-args -r __ns:=/cam3
 Subscribes image_raw/compressed and image_raw (rgb8/bgr8), and camera_info (to check image sizes);
-publishes silhouette/compressed (PNG, mono8 0/255), skin_ellipses, labelled_contour and, with
-publish_overlay, features_overlay, each with the source image's header unchanged. The raw silhouette
-(sensor_msgs/Image mono8, 2 MB at 1080p) is made and published only while something subscribes to it. Bad input (undecodable or wrongly
+publishes skin_ellipses, labelled_contour, the silhouette (mono8 0/255) as silhouette/compressed (PNG)
+and silhouette (sensor_msgs/Image; 2 MB at 1080p), and with publish_overlay features_overlay, each with
+the source image's header unchanged. The silhouettes are made only while something subscribes to them.
+Its state and CPU per stage (decode, features, conversion, publish) go to /diagnostics once a second. Bad input (undecodable or wrongly
 encoded images, sizes that disagree with camera_info, no person) is logged once per cause and
 answered with empty features carrying a status; the node keeps running.
 """
@@ -17,6 +18,7 @@ from sensor_msgs.msg import CameraInfo, CompressedImage, Image
 
 from mvpose_nodes.ros.conversions import (ImageError, colour_image, empty_feature_messages, feature_messages, mono_image,
                                           png_mono, rgb_image)
+from mvpose_nodes.ros.diagnostics import NodeDiagnostics, StageClock
 from mvpose_nodes.ros.helpers import LATCHED, ReportOnce, camera_of_namespace, run_node
 from mvpose_nodes.ros.params import (CAMERA_FEATURES, ParameterError, changed_values, declare_parameters,
                                      default_skin_model_path, feature_settings_from)
@@ -46,6 +48,10 @@ class CameraFeaturesNode(ReportOnce, Node):
             resolved = self.resolve_topic_name(topic)
             self.create_subscription(kind, topic, lambda message, t=resolved: self.on_image(message, t), STREAM_DEPTH)
         self.create_subscription(CameraInfo, 'camera_info', self.on_camera_info, LATCHED)
+        self.clock = StageClock()   # CPU per stage: decode, features, conversion, publish
+        self.counts = {'images': 0, 'images with a person': 0, 'images rejected': 0}
+        self.last_problem = ''
+        self.diagnostics = NodeDiagnostics(self, self.state, [self.clock])
         self.get_logger().info(f'camera {self.camera}: {self.values["silhouette_method"]} silhouettes, '
                                f'skin model {self.values["skin_model"] or default_skin_model_path()}')
 
@@ -71,13 +77,17 @@ class CameraFeaturesNode(ReportOnce, Node):
         self.camera_info = message
 
     def on_image(self, message, topic):
+        self.counts['images'] += 1
         try:
-            rgb = colour_image(message)
+            with self.clock('decode'):
+                rgb = colour_image(message)
         except ImageError as error:
             return self.reject(message.header, *error.size, f'{error.kind}: {topic}', f'{topic}: {error}')
         self.process(rgb, message.header, topic)
 
     def reject(self, header, width, height, cause, reason):
+        self.counts['images rejected'] += 1
+        self.last_problem = reason
         self.report_once(cause, f'{reason}; publishing empty features with STATUS_BAD_INPUT')
         self.publish(np.zeros((max(height, 0), max(width, 0)), bool), header,
                      *empty_feature_messages(header, LabelledContour.STATUS_BAD_INPUT, reason))
@@ -97,22 +107,43 @@ class CameraFeaturesNode(ReportOnce, Node):
                 return self.reject(header, width, height, 'learning', 'learning the background from the first '
                                    f"{self.values['background_frames']} frames (no person expected in them)")
             return
-        features = self.extractor(rgb)
+        with self.clock('features'):
+            features = self.extractor(rgb)
         if not features.person:
             self.report_once('no person', f'{topic}: no person found (publishing empty features, '
                                           'STATUS_NO_PERSON; logged once)')
-        self.publish(features.silhouette, header, *feature_messages(features, header))
+        else:
+            self.counts['images with a person'] += 1
+        with self.clock('conversion'):
+            messages = feature_messages(features, header)
+        self.publish(features.silhouette, header, *messages)
         if self.values['publish_overlay']:
             self.overlay_publisher.publish(rgb_image(draw_features(rgb, features), header))
 
     def publish(self, silhouette, header, ellipses, contour):
         """silhouette: (H, W) bool, the person's pixels."""
-        mask = silhouette.astype(np.uint8) * 255
-        self.compressed_silhouette_publisher.publish(png_mono(mask, header))
-        if self.silhouette_publisher.get_subscription_count():
-            self.silhouette_publisher.publish(mono_image(mask, header))
-        self.ellipses_publisher.publish(ellipses)
-        self.contour_publisher.publish(contour)
+        # The silhouettes are for people and tools to look at (the fitter reads the contour): made only
+        # while something subscribes, as image_transport publishes.
+        with self.clock('conversion'):
+            mask = silhouette.astype(np.uint8) * 255
+            silhouettes = [(publisher, make(mask, header)) for publisher, make in (
+                (self.compressed_silhouette_publisher, png_mono), (self.silhouette_publisher, mono_image))
+                if publisher.get_subscription_count()]
+        with self.clock('publish'):
+            for publisher, message in silhouettes:
+                publisher.publish(message)
+            self.ellipses_publisher.publish(ellipses)
+            self.contour_publisher.publish(contour)
+
+    def state(self):
+        """The node's diagnostics: level, message and counters (ros/diagnostics.py)."""
+        counts = self.counts
+        if not counts['images']:
+            return 'ok', 'no image yet', counts
+        message = f"{counts['images']} images, {counts['images with a person']} with a person"
+        if counts['images rejected']:
+            return 'warn', f"{message}, {counts['images rejected']} rejected (last: {self.last_problem})", counts
+        return 'ok', message, counts
 
 
 def main(args=None):

@@ -1,18 +1,28 @@
 """skeleton_fitter: the cameras' features -> the fitted 15-joint skeleton (paper 000 Sec. 4–6, paper 004).
 
 For each configured camera it subscribes /cam<K>/skin_ellipses and /cam<K>/labelled_contour (through
-an approximate-time synchroniser: fitting/sync.py) and the camera's camera_info and camera_pose. Every synchronised frame set is fitted (ros/frame_set_fitting.py) and published as
-/mvpose/skeleton (mvpose_msgs/Skeleton: joint poses, the 29 parameters, the six stages), the 29
-parameters as /mvpose/joint_states (sensor_msgs/JointState), and /mvpose/skeleton_markers
-(visualization_msgs/MarkerArray in `world`, for RViz and Foxglove). A camera whose features stop is
-left out after camera_timeout (status DEGRADED) and rejoins when they come back. A frame set with fewer
-than two cameras seeing the person gets STATUS_LOST, repeating the last fitted pose.
+an approximate-time synchroniser: fitting/sync.py) and the camera's camera_info and camera_pose. The
+synchronised frame sets are fitted (ros/frame_set_fitting.py) in a worker thread: when they come faster
+than the fitter, the stale ones are skipped (pending_frame_sets; counted in the next status_message and
+on /diagnostics) rather than queued. Each fit is published as /mvpose/skeleton (mvpose_msgs/Skeleton: joint
+poses, the 29 parameters, the six stages), the 29 parameters as /mvpose/joint_states
+(sensor_msgs/JointState), and /mvpose/skeleton_markers (visualization_msgs/MarkerArray in `world`, for
+RViz and Foxglove); the node's state and CPU per stage once a second on /diagnostics
+(diagnostic_msgs/DiagnosticArray). A camera whose features stop is left out after camera_timeout
+(status DEGRADED) and rejoins when they come back. A frame set with fewer than two cameras seeing the
+person gets STATUS_LOST, repeating the last fitted pose.
 """
+import threading
+
+import cv2
 from mvpose_msgs.msg import LabelledContour, Skeleton, SkinEllipseArray
 from sensor_msgs.msg import JointState
 from visualization_msgs.msg import MarkerArray
 
+from mvpose_nodes.fitting.fitter import warm_up
+from mvpose_nodes.fitting.sync import PendingSets
 from mvpose_nodes.ros.conversions import joint_state, joints_from_skeleton, skeleton_markers
+from mvpose_nodes.ros.diagnostics import NodeDiagnostics
 from mvpose_nodes.ros.frame_set_fitting import FrameSetFitter
 from mvpose_nodes.ros.helpers import LATCHED, run_node
 from mvpose_nodes.ros.multi_camera import MultiCameraNode
@@ -20,30 +30,77 @@ from mvpose_nodes.ros.params import SKELETON_FITTER, fitter_settings_from
 
 # The silhouette is not an input: the labelled contour is its outline, and all the fit reads of it.
 FEATURES = {'skin_ellipses': SkinEllipseArray, 'labelled_contour': LabelledContour}
+STATUS_NAMES = {Skeleton.STATUS_OK: 'OK', Skeleton.STATUS_INITIALISING: 'INITIALISING',
+                Skeleton.STATUS_DEGRADED: 'DEGRADED', Skeleton.STATUS_LOST: 'LOST'}
 
 
 class SkeletonFitterNode(MultiCameraNode):
     def __init__(self):
         super().__init__('skeleton_fitter', FEATURES, SKELETON_FITTER)
-        self.fitting = FrameSetFitter(fitter_settings_from(self.values), self.cameras)
+        cv2.setNumThreads(1)
+        warm_up()   # the compiled objective loaded (or compiled, the first time) before any frame set waits
+        self.fitting = FrameSetFitter(fitter_settings_from(self.values), self.cameras, self.clock)
         self.skeleton_publisher = self.create_publisher(Skeleton, '/mvpose/skeleton', LATCHED)
         self.joint_state_publisher = self.create_publisher(JointState, '/mvpose/joint_states', 10)
         self.marker_publisher = self.create_publisher(MarkerArray, '/mvpose/skeleton_markers', 10)
+        # Frame sets are fitted in a worker thread; while it is busy, at most pending_frame_sets wait (the
+        # oldest are skipped), so a fast input never builds a backlog.
+        self.pending = PendingSets(self.values['pending_frame_sets'])
+        self.counts = {'frame sets fitted': 0, 'frame sets skipped (stale)': 0, 'frame sets without a fit': 0}
+        self.last_status = None
+        self.worker = threading.Thread(target=self.work, name='fitting', daemon=True)
+        self.diagnostics = NodeDiagnostics(self, self.state, [self.clock], {'fitting': self.worker})
+        self.worker.start()
         self.get_logger().info(f'fitting cameras {self.cameras}')
 
     def on_frame_set(self, frame_set):
+        self.pending.put(frame_set)
+
+    def work(self):
+        reported_skips = 0
+        while not self.pending.closed:
+            frame_set = self.pending.take(timeout=0.5)
+            if frame_set is None:
+                continue
+            skipped, reported_skips = self.pending.skipped - reported_skips, self.pending.skipped
+            try:
+                self.fit_and_publish(frame_set, skipped)
+            except Exception as error:   # a bug must not stop the fitting: say it, drop the set, go on
+                self.get_logger().error(f'frame set {frame_set.stamp_ns} ns dropped: {type(error).__name__}: {error}')
+
+    def fit_and_publish(self, frame_set, skipped):
         features = {number: (self.camera(number), frame_set.messages[(number, 'skin_ellipses')],
                              frame_set.messages[(number, 'labelled_contour')])
                     for number in self.cameras if (number, 'labelled_contour') in frame_set.messages}
-        result = self.fitting.fit(frame_set.stamp_ns, features, frame_set.missing_groups)
+        result = self.fitting.fit(frame_set.stamp_ns, features, frame_set.missing_groups, skipped)
+        self.counts['frame sets skipped (stale)'] += skipped
         for cause, text in result.problems:
             self.report_once(cause, text)
+        if result.message is None or result.message.status == Skeleton.STATUS_LOST:
+            self.counts['frame sets without a fit'] += 1
+        else:
+            self.counts['frame sets fitted'] += 1
         if result.message is not None:
             message = result.message
-            self.skeleton_publisher.publish(message)
-            self.joint_state_publisher.publish(joint_state(result.parameters, message.header))
-            self.marker_publisher.publish(skeleton_markers(joints_from_skeleton(message), message.header,
-                                                           message.status))
+            self.last_status = message.status
+            with self.clock('publish'):
+                self.skeleton_publisher.publish(message)
+                self.joint_state_publisher.publish(joint_state(result.parameters, message.header))
+                self.marker_publisher.publish(skeleton_markers(joints_from_skeleton(message), message.header,
+                                                               message.status))
+
+    def state(self):
+        """The node's diagnostics: level, message and counters (ros/diagnostics.py)."""
+        level = 'ok' if self.last_status in (Skeleton.STATUS_OK, Skeleton.STATUS_INITIALISING) else 'warn'
+        message = (f"{self.counts['frame sets fitted']} frame sets fitted, "
+                   f"{self.counts['frame sets skipped (stale)']} skipped (stale), last status "
+                   f"{STATUS_NAMES.get(self.last_status, 'none yet')}")
+        return level, message, self.counts
+
+    def destroy_node(self):
+        self.pending.close()
+        self.worker.join(timeout=10)
+        super().destroy_node()
 
 
 def main(args=None):

@@ -17,6 +17,7 @@ from mvpose_nodes.body.model import PARAMETER_NAMES
 from mvpose_nodes.fitting.fitter import SkeletonFitter, view_from_features
 from mvpose_nodes.ros.conversions import (contour_from_message, keypoints_from_messages, skeleton_message,
                                           stage_messages)
+from mvpose_nodes.ros.diagnostics import StageClock
 
 
 @dataclass
@@ -29,17 +30,20 @@ class FrameSetResult:
 
 
 class FrameSetFitter:
-    """The skeleton fitter behind the node: `settings` (fitting.settings.FitterSettings) and the
-    configured camera numbers."""
+    """The skeleton fitter behind the node: `settings` (fitting.settings.FitterSettings), the configured
+    camera numbers, and the StageClock that counts the CPU of its stages ('conversion', 'distance maps',
+    'fit')."""
 
-    def __init__(self, settings, cameras):
+    def __init__(self, settings, cameras, clock=None):
         self.fitter = SkeletonFitter(settings)
         self.cameras = list(cameras)
+        self.clock = clock or StageClock()
 
-    def fit(self, stamp_ns, features, missing_cameras=()):
+    def fit(self, stamp_ns, features, missing_cameras=(), skipped=0):
         """features: {camera number: (body.camera.Camera or None while its calibration is missing,
         SkinEllipseArray, LabelledContour)} of the cameras that sent this frame set; missing_cameras:
-        configured cameras left out by the synchroniser (silent). A FrameSetResult."""
+        configured cameras left out by the synchroniser (silent); skipped: frame sets skipped since the
+        last one (real time: fitting.sync.NewestOnly), said in the status_message. A FrameSetResult."""
         problems, views = [], []
         for number in self.cameras:
             if number not in features:
@@ -47,29 +51,35 @@ class FrameSetFitter:
             camera, ellipses, contour = features[number]
             if camera is None or contour.status != LabelledContour.STATUS_OK:
                 continue
-            try:
-                labels = contour_from_message(contour)
-            except ValueError as error:
-                problems.append((f'contour {number}', f'/cam{number}/labelled_contour: {error}; dropped'))
-                continue
-            skin = [(e.center_x, e.center_y, e.area) for e in ellipses.ellipses]
-            views.append(view_from_features(camera, keypoints_from_messages(ellipses, contour), labels,
-                                            ellipses.face_visibility, skin))
+            with self.clock('conversion'):
+                try:
+                    labels = contour_from_message(contour)
+                except ValueError as error:
+                    problems.append((f'contour {number}', f'/cam{number}/labelled_contour: {error}; dropped'))
+                    continue
+                skin = [(e.center_x, e.center_y, e.area) for e in ellipses.ellipses]
+                keypoints = keypoints_from_messages(ellipses, contour)
+            with self.clock('distance maps'):
+                views.append(view_from_features(camera, keypoints, labels, ellipses.face_visibility, skin))
+        skipped_text = f'{skipped} stale frame set(s) skipped before this one' if skipped else ''
         if len(views) < 2:
-            return self.lost(stamp_ns, problems, 'few views', f'fewer than 2 cameras with a person at {stamp_ns} ns')
+            return self.lost(stamp_ns, problems, 'few views',
+                             joined(f'fewer than 2 cameras with a person at {stamp_ns} ns', skipped_text))
         try:
-            fit = self.fitter.fit(stamp_ns / 1e9, views)
+            with self.clock('fit'):
+                fit = self.fitter.fit(stamp_ns / 1e9, views)
         except ValueError as error:
-            return self.lost(stamp_ns, problems, 'fit', f'no fit at {stamp_ns} ns: {error}')
+            return self.lost(stamp_ns, problems, 'fit', joined(f'no fit at {stamp_ns} ns: {error}', skipped_text))
         used = {v.camera.number for v in views}
         degraded = bool(missing_cameras) or used != set(self.cameras) or not all(s.fitted for s in fit.stages)
         status = (Skeleton.STATUS_LOST if fit.lost else Skeleton.STATUS_INITIALISING if fit.initialised
                   else Skeleton.STATUS_DEGRADED if degraded else Skeleton.STATUS_OK)
-        reason = (f'lost: the fit leaves {100 * fit.lost:.0f} % of the outline unexplained; re-initialising'
-                  if fit.lost else f'cameras used: {sorted(used)}' if degraded else '')
-        message = skeleton_message(fit.joints, stamp_ns, parameter_names=list(PARAMETER_NAMES),
-                                   parameters=fit.parameters.tolist(), stages=stage_messages(fit.stages),
-                                   status=status, status_message=reason, fit_time=fit.seconds)
+        reason = joined(f'lost: the fit leaves {100 * fit.lost:.0f} % of the outline unexplained; re-initialising'
+                        if fit.lost else f'cameras used: {sorted(used)}' if degraded else '', skipped_text)
+        with self.clock('conversion'):
+            message = skeleton_message(fit.joints, stamp_ns, parameter_names=list(PARAMETER_NAMES),
+                                       parameters=fit.parameters.tolist(), stages=stage_messages(fit.stages),
+                                       status=status, status_message=reason, fit_time=fit.seconds)
         return FrameSetResult(message, fit.parameters, problems)
 
     def lost(self, stamp_ns, problems, cause, reason):
@@ -82,3 +92,8 @@ class FrameSetFitter:
         message = skeleton_message(joints, stamp_ns, parameter_names=list(PARAMETER_NAMES),
                                    parameters=parameters.tolist(), status=Skeleton.STATUS_LOST, status_message=reason)
         return FrameSetResult(message, parameters, problems)
+
+
+def joined(*parts):
+    """The non-empty parts of a status_message, joined by '; '."""
+    return '; '.join(part for part in parts if part)

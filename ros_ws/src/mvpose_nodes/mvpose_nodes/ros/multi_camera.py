@@ -14,6 +14,7 @@ from sensor_msgs.msg import CameraInfo
 
 from mvpose_nodes.fitting.sync import ApproximateTimeSynchronizer, HeldSets
 from mvpose_nodes.ros.conversions import camera_from_messages, stamp_ns
+from mvpose_nodes.ros.diagnostics import StageClock
 from mvpose_nodes.ros.helpers import LATCHED, ReportOnce
 from mvpose_nodes.ros.params import declare_parameters
 
@@ -28,6 +29,7 @@ class MultiCameraNode(ReportOnce, Node):
     def __init__(self, name, inputs, parameters):
         super().__init__(name)
         self.values = declare_parameters(self, parameters)
+        self.clock = StageClock()   # CPU per stage (ros/diagnostics.py): 'sync' here, the subclass's own
         self.cameras = cameras = self.values['cameras']
         channels = [(k, topic) for k in cameras for topic in inputs]
         self.sync = ApproximateTimeSynchronizer(
@@ -64,8 +66,9 @@ class MultiCameraNode(ReportOnce, Node):
 
     def receiver(self, camera, topic):
         def receive(message):
-            for frame_set in self.sync.add((camera, topic), stamp_ns(message.header), message):
-                self.held.add(frame_set, time.monotonic())
+            with self.clock('sync'):
+                for frame_set in self.sync.add((camera, topic), stamp_ns(message.header), message):
+                    self.held.add(frame_set, time.monotonic())
             self.release_held()
         return receive
 

@@ -1,0 +1,107 @@
+"""Where a node's CPU goes, and the ROS diagnostics topic.
+
+StageClock adds up the CPU seconds of the calling thread (time.thread_time) spent in each named stage of
+a node's work. NodeDiagnostics publishes the node's state once a second as diagnostic_msgs/DiagnosticArray
+on /diagnostics, the topic that ROS tools (rqt_robot_monitor, diagnostic_aggregator, Foxglove) read: one
+DiagnosticStatus named after the node, hardware_id the host, its level and message from the node, and as
+values the node's own counters and the CPU seconds since the node started:
+  cpu/process                   every thread of the process (time.process_time)
+  cpu/thread/<name>             one thread (e.g. 'executor': rclpy's callbacks, taking and deserialising
+                                messages; 'fitting': the fitter's worker)
+  cpu/stage/<stage>, calls/<stage>   the StageClock stages (each within one of the threads)
+What no stage covers in a thread is rclpy's own work there (take, deserialise, executor); what no
+thread covers in the process is DDS's threads (transport, discovery) and the interpreter's.
+"""
+import socket
+import threading
+import time
+from contextlib import contextmanager
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+
+DIAGNOSTICS_TOPIC = '/diagnostics'
+DIAGNOSTICS_PERIOD = 1.0   # [s], as ROS's diagnostic_updater publishes
+LEVELS = {'ok': DiagnosticStatus.OK, 'warn': DiagnosticStatus.WARN, 'error': DiagnosticStatus.ERROR}
+
+
+class StageClock:
+    """CPU seconds per stage: `with clock('fit'): ...` adds the calling thread's CPU time of the block."""
+
+    def __init__(self):
+        self.seconds, self.calls = {}, {}
+        self._lock = threading.Lock()
+
+    @contextmanager
+    def __call__(self, stage):
+        started = time.thread_time()
+        try:
+            yield
+        finally:
+            spent = time.thread_time() - started
+            with self._lock:
+                self.seconds[stage] = self.seconds.get(stage, 0.0) + spent
+                self.calls[stage] = self.calls.get(stage, 0) + 1
+
+    def snapshot(self):
+        """{stage: (CPU seconds, calls)} so far."""
+        with self._lock:
+            return {stage: (seconds, self.calls[stage]) for stage, seconds in self.seconds.items()}
+
+
+def thread_cpu_seconds(thread):
+    """CPU seconds of a running threading.Thread (its POSIX thread CPU clock); None once it has ended."""
+    try:
+        return time.clock_gettime(time.pthread_getcpuclockid(thread.ident))
+    except (OSError, TypeError):
+        return None
+
+
+def status_values(clocks, threads, counters):
+    """The DiagnosticStatus values [KeyValue] of StageClocks, {name: threading.Thread} and {key: value}."""
+    values = [KeyValue(key='cpu/process', value=f'{time.process_time():.6f}')]
+    for name, thread in threads.items():
+        seconds = thread_cpu_seconds(thread)
+        if seconds is not None:
+            values.append(KeyValue(key=f'cpu/thread/{name}', value=f'{seconds:.6f}'))
+    for clock in clocks:
+        for stage, (seconds, calls) in clock.snapshot().items():
+            values += [KeyValue(key=f'cpu/stage/{stage}', value=f'{seconds:.6f}'),
+                       KeyValue(key=f'calls/{stage}', value=str(calls))]
+    values += [KeyValue(key=key, value=str(value)) for key, value in counters.items()]
+    return values
+
+
+def stage_cpu(status):
+    """Parse a DiagnosticStatus of NodeDiagnostics: ({'process': s, 'thread/<name>': s, 'stage/<stage>': s},
+    {stage: calls}, {other key: value})."""
+    cpu, calls, other = {}, {}, {}
+    for item in status.values:
+        if item.key.startswith('cpu/'):
+            cpu[item.key[4:]] = float(item.value)
+        elif item.key.startswith('calls/'):
+            calls[item.key[6:]] = int(item.value)
+        else:
+            other[item.key] = item.value
+    return cpu, calls, other
+
+
+class NodeDiagnostics:
+    """Publishes `node`'s DiagnosticStatus on /diagnostics every DIAGNOSTICS_PERIOD. state() -> (level
+    'ok' | 'warn' | 'error', message, {key: value}); clocks: StageClocks; threads: {name: Thread} (the
+    executor's, the thread that creates this, is added as 'executor')."""
+
+    def __init__(self, node, state, clocks=(), threads=None):
+        self.node, self.state, self.clocks = node, state, list(clocks)
+        self.threads = {'executor': threading.current_thread(), **(threads or {})}
+        self.publisher = node.create_publisher(DiagnosticArray, DIAGNOSTICS_TOPIC, 10)
+        self.hardware_id = socket.gethostname()
+        node.create_timer(DIAGNOSTICS_PERIOD, self.publish)
+
+    def publish(self):
+        level, message, counters = self.state()
+        status = DiagnosticStatus(level=LEVELS[level], name=self.node.get_fully_qualified_name(), message=message,
+                                  hardware_id=self.hardware_id,
+                                  values=status_values(self.clocks, self.threads, counters))
+        array = DiagnosticArray(status=[status])
+        array.header.stamp = self.node.get_clock().now().to_msg()
+        self.publisher.publish(array)
