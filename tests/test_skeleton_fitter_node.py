@@ -117,7 +117,7 @@ def test_features_that_come_before_the_calibration_wait_for_it(rendered_features
     """Issue 13: no frame set is lost at start-up because calibration came after the first images: the
     fitter holds the frame sets (calibration_wait) and fits them, in order, once it comes. With every set
     fitted (pending_frame_sets 0): by default the burst of held sets is real time's backlog, of which the
-    newest is fitted (test_real_time.py)."""
+    newest is fitted (test_frame_sets_faster_than_the_fitter_skip_the_stale_ones)."""
     fitter = background('run', 'skeleton_fitter', '--ros-args', '-p', f'cameras:={list(CAMERAS)}',
                         '-p', 'calibration_wait:=30.0', '-p', 'pending_frame_sets:=0')
     node = rclpy.create_node('early_features')
@@ -147,5 +147,53 @@ def test_features_that_come_before_the_calibration_wait_for_it(rendered_features
         node.destroy_node()
     assert [stamp_ns(m.header) for m in received] == stamps, 'in order, each once'
     assert received[0].status == Skeleton.STATUS_INITIALISING
+    code, _, err = fitter.interrupt()
+    assert code == 0, err
+
+
+BURST = 8   # frame sets sent back to back, within the fitter's input queues (depth 10)
+
+
+def test_frame_sets_faster_than_the_fitter_skip_the_stale_ones(rendered_features, background, ros_context):
+    """Issue 14, over DDS: frame sets sent faster than the fitter fits are not queued: at most one waits,
+    the older ones are skipped and said so (status_message, /diagnostics), and the newest is fitted."""
+    import re
+    from diagnostic_msgs.msg import DiagnosticArray
+    fitter = background('run', 'skeleton_fitter', '--ros-args', '-p', f'cameras:={list(CAMERAS)}')
+    node = rclpy.create_node('fast_features')
+    received, diagnostics = [], []
+    node.create_subscription(Skeleton, '/mvpose/skeleton', received.append, 100)
+    node.create_subscription(DiagnosticArray, '/diagnostics', diagnostics.append, 100)
+    publishers = {(k, topic): Publisher(node, kind, f'/cam{k}/{topic}', 10)
+                  for k in CAMERAS for topic, kind in FEATURES.items()}
+    stamps = [frame_stamp_ns(60 + i) for i in range(BURST + 1)]
+
+    def send(stamp):
+        for k, (camera, features) in rendered_features.items():
+            header = set_stamp(Image().header, stamp, optical_frame(k))
+            for topic, message in zip(FEATURES, feature_messages(features, header)):
+                publishers[(k, topic)].publisher.publish(message)
+    try:
+        for k, (camera, _) in rendered_features.items():
+            for message, topic in zip(calibration_messages(camera, stamps[0]), ('camera_info', 'camera_pose')):
+                Publisher(node, type(message), f'/cam{k}/{topic}', LATCHED).publish(message, subscribers=0)
+        for publisher in publishers.values():
+            publisher.wait_for_subscribers(timeout=30)
+        send(stamps[0])   # the first alone: the fitter is ready when the burst comes
+        spin_until(node, lambda: received, 60, 'the first skeleton')
+        for stamp in stamps[1:]:
+            send(stamp)
+        spin_until(node, lambda: stamp_ns(received[-1].header) == stamps[-1], 60, 'the newest frame set fitted')
+        burst = received[1:]
+        skipped = sum(int(m[1]) for s in burst for m in [re.search(r'(\d+) stale frame set', s.status_message)] if m)
+        spin_until(node, lambda: any(v.key == 'frame sets skipped (stale)' and v.value == str(skipped)
+                                     for array in diagnostics for status in array.status for v in status.values),
+                   10, f'/diagnostics counting {skipped} skipped frame sets')
+    finally:
+        node.destroy_node()
+    fitted = [stamp_ns(m.header) for m in burst]
+    assert fitted == sorted(set(fitted)) and set(fitted) <= set(stamps[1:]), 'in order, each at most once'
+    assert len(fitted) + skipped == BURST, 'every frame set fitted or counted as skipped'
+    assert skipped >= 1, 'the burst came faster than the fitter'
     code, _, err = fitter.interrupt()
     assert code == 0, err

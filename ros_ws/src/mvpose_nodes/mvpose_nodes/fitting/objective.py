@@ -24,6 +24,11 @@ from mvpose_nodes.vision.contour import SIDE_A, SIDE_B
 SEGMENT_POINTS = 100  # N of Eq. 4
 MAP_MARGIN_PX = 50    # the maps reach this far beyond the contour, so fitted segments rarely leave them
 BILINEAR_STEPS = 32   # map look-ups resolve 1/32 px, as cv2.remap (INTER_BITS = 5)
+# The boundary maps are computed on a grid this many times coarser and resized (within a pixel of exact):
+# 2.7 times cheaper (1080p: 3.7 instead of 10 ms per view, the fitter's largest cost beside the fit
+# itself), and measured no worse: the demo walk 29.5 against 31.3 mm, 22 tuning cases of the suite 169
+# against 188 mm mean. OpenCV's approximate DIST_MASK_5 at full size was less cheap and worse (40 mm).
+MAP_COARSENING = 2
 
 
 @dataclass(frozen=True)
@@ -99,8 +104,9 @@ def boundary_distances(contour_labels, image_size, labels=None, margin=MAP_MARGI
     """BoundaryDistances of one camera's ContourLabels for the parts in `labels` (default: every label
     with pixels on both sides). image_size: (width, height) [px]. One cv2.distanceTransform (DIST_L2,
     DIST_MASK_PRECISE: exact Euclidean distances) per (label, side) on a mask that is 0 on that side's
-    boundary pixels, restricted to the contour's box (about 3 ms per map for a 1080p person), written
-    straight into the BoundaryDistances' buffer."""
+    boundary pixels, restricted to the contour's box, on a grid MAP_COARSENING times coarser (a boundary
+    pixel moves by half a pixel), resized bilinearly into the BoundaryDistances' buffer: the maps are
+    within a pixel of the exact distances."""
     points, part_labels, sides = contour_labels.points, contour_labels.labels, contour_labels.sides
     if labels is None:
         labels = set(part_labels[sides == SIDE_A].tolist()) & set(part_labels[sides == SIDE_B].tolist())
@@ -115,11 +121,13 @@ def boundary_distances(contour_labels, image_size, labels=None, margin=MAP_MARGI
     maps, origins, widths, offsets, side_pixels = {}, {}, {}, {}, {}
     for index, (label, side) in enumerate(present):
         pixels = points[(part_labels == label) & (sides == side)] - (x0, y0)
-        mask = np.ones(shape, np.uint8)
-        mask[pixels[:, 1], pixels[:, 0]] = 0
+        coarse = np.ones((-(-shape[0] // MAP_COARSENING), -(-shape[1] // MAP_COARSENING)), np.uint8)
+        coarse[pixels[:, 1] // MAP_COARSENING, pixels[:, 0] // MAP_COARSENING] = 0
         offsets[(label, side)] = index * shape[0] * shape[1]
-        maps[(label, side)] = buffer[offsets[(label, side)]:offsets[(label, side)] + mask.size].reshape(shape)
-        cv2.distanceTransform(mask, cv2.DIST_L2, cv2.DIST_MASK_PRECISE, dst=maps[(label, side)])
+        maps[(label, side)] = buffer[offsets[(label, side)]:offsets[(label, side)] + shape[0] * shape[1]].reshape(shape)
+        coarse_map = cv2.distanceTransform(coarse, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+        coarse_map *= MAP_COARSENING
+        cv2.resize(coarse_map, shape[::-1], dst=maps[(label, side)], interpolation=cv2.INTER_LINEAR)
         origins[label] = (int(x0), int(y0))
         side_pixels[(label, side)] = pixels
     for label in labels:
