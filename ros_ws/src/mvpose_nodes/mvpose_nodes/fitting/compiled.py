@@ -430,7 +430,7 @@ def nelder_mead(simplex, xatol, fatol, maxfev, stage, frame, bone_lengths, fract
     return sim[0].copy(), costs[0], calls
 
 
-# Entry points from Python, with the packs' fields as separate arguments: numba types top-level arrays in C,
+# The entry point from Python, with the packs' fields as separate arguments: numba types top-level arrays in C,
 # but the arrays inside a tuple in Python, at about 10 µs each, which cost more than a stage objective.
 @njit(cache=True, nogil=True, error_model='numpy')
 def search(simplex, xatol, fatol, maxfev, bone_lengths, fractions, samples, used,
@@ -438,7 +438,8 @@ def search(simplex, xatol, fatol, maxfev, bone_lengths, fractions, samples, used
            points, point_view, bones, bone_slot, keypoint_view, keypoint_joint, keypoint_xy, keypoint_weight,
            weights, K, R, t, D, has_outline, outside, outside_at, outside_shape, outside_origin, slot, boundary,
            boundary_at, boundary_shape, boundary_origin, boundary_width):
-    """nelder_mead with the StagePack and FramePack given field by field: search(..., *stage, *frame)."""
+    """nelder_mead with the StagePack and FramePack given field by field: search(..., *stage, *frame).
+    With maxfev 1 it evaluates the simplex's first vertex and stops: one evaluation of the objective."""
     stage = StagePack(indices, base, start, steps, low, high, capsules, capsule_radius, capsule_terminal,
                       assigned, points, point_view, bones, bone_slot, keypoint_view, keypoint_joint, keypoint_xy,
                       keypoint_weight, weights)
@@ -446,17 +447,3 @@ def search(simplex, xatol, fatol, maxfev, bone_lengths, fractions, samples, used
                       boundary_at, boundary_shape, boundary_origin, boundary_width)
     return nelder_mead(simplex, xatol, fatol, maxfev, stage, frame, bone_lengths, fractions, samples, used)
 
-
-@njit(cache=True, nogil=True, error_model='numpy')
-def objective(values, bone_lengths, fractions, samples, used,
-              indices, base, start, steps, low, high, capsules, capsule_radius, capsule_terminal, assigned,
-              points, point_view, bones, bone_slot, keypoint_view, keypoint_joint, keypoint_xy, keypoint_weight,
-              weights, K, R, t, D, has_outline, outside, outside_at, outside_shape, outside_origin, slot, boundary,
-              boundary_at, boundary_shape, boundary_origin, boundary_width):
-    """stage_objective with the StagePack and FramePack given field by field: objective(..., *stage, *frame)."""
-    stage = StagePack(indices, base, start, steps, low, high, capsules, capsule_radius, capsule_terminal,
-                      assigned, points, point_view, bones, bone_slot, keypoint_view, keypoint_joint, keypoint_xy,
-                      keypoint_weight, weights)
-    frame = FramePack(K, R, t, D, has_outline, outside, outside_at, outside_shape, outside_origin, slot, boundary,
-                      boundary_at, boundary_shape, boundary_origin, boundary_width)
-    return stage_objective(values, stage, frame, bone_lengths, fractions, samples, used)

@@ -27,7 +27,7 @@ from mvpose_nodes.body.kinematics import BONE_INDEX, BONES, forward_kinematics
 from mvpose_nodes.body.model import (JOINT_INDEX, LABEL_HEAD, LABEL_LEFT_LEG, LABEL_RIGHT_LEG, LABEL_TORSO,
                                      PARAMETER_INDEX)
 from mvpose_nodes.fitting.compiled import (LABEL_SLOT, StagePack, bone_length_array, fractions_arrays, nearest_capsules,
-                                           objective, search)
+                                           search)
 from mvpose_nodes.fitting.objective import (CAPSULE_RADII, TERMINAL_BONES, inside_cost, limb_cost,
                                             outline_cost)
 
@@ -142,7 +142,8 @@ class StageSearch:
         contributed)."""
         pack = self.stage_pack(stage, parameters, views, assigned, priors=False)
         used = np.zeros(len(views), np.bool_)
-        cost = objective(parameters[pack.indices], self.bone_lengths, FRACTIONS, SAMPLES, used, *pack, *frame)
+        vertices = np.tile(parameters[pack.indices], (len(pack.indices) + 1, 1))   # a search of one evaluation
+        _, cost, _ = search(vertices, 0.0, 0.0, 1, self.bone_lengths, FRACTIONS, SAMPLES, used, *pack, *frame)
         return float(cost), np.flatnonzero(used).tolist()
 
     def stage_pack(self, stage, parameters, views, assigned, priors):
