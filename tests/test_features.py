@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from mvpose_nodes.vision.features import ellipse_of
-from mvpose_nodes.vision.silhouette import BackgroundModel, chroma_key_foreground, clean_mask, silhouette_keypoints
+from mvpose_nodes.vision.silhouette import (BackgroundModel, chroma_key_foreground, clean_mask, component_box, components,
+                                            silhouette_keypoints)
 
 pytestmark = pytest.mark.pure
 
@@ -57,6 +58,20 @@ def test_clean_mask_keeps_the_person_fills_small_holes_not_the_gap_between_legs(
     assert not cleaned[420, 485], 'the gap between the legs stays open'
     assert np.logical_xor(cleaned, person).sum() < 0.02 * person.sum()
     assert not clean_mask(foreground, min_area=10 ** 6).any(), 'too small for a person: nothing'
+
+
+@pytest.mark.parametrize('connectivity', [4, 8])
+def test_components_give_opencvs_labels_areas_and_boxes(connectivity):
+    # components() replaces cv2.connectedComponentsWithStats (7x slower here): the same components.
+    rng = np.random.default_rng(connectivity)
+    mask = cv2.dilate((rng.random((120, 90)) < 0.02).astype(np.uint8), np.ones((3, 3), np.uint8))
+    labels, areas = components(mask.astype(bool), connectivity)
+    count, expected_labels, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=connectivity)
+    assert count > 20 and len(areas) == count
+    np.testing.assert_array_equal(labels, expected_labels)
+    np.testing.assert_array_equal(areas, stats[:, cv2.CC_STAT_AREA])
+    for label in range(1, count):
+        assert component_box(labels, label) == tuple(int(v) for v in stats[label, :4])
 
 
 def test_silhouette_keypoints_of_a_known_figure():

@@ -2,9 +2,10 @@
 
 For each configured camera it subscribes /cam<K>/skin_ellipses and /cam<K>/labelled_contour (through
 an approximate-time synchroniser: fitting/sync.py) and the camera's camera_info and camera_pose. The
-synchronised frame sets are fitted (ros/frame_set_fitting.py) in a worker thread: when they come faster
-than the fitter, the stale ones are skipped (pending_frame_sets; counted in the next status_message and
-on /diagnostics) rather than queued. Each fit is published as /mvpose/skeleton (mvpose_msgs/Skeleton: joint
+synchronised frame sets are fitted (ros/frame_set_fitting.py) in two worker threads, one making a set's
+distance maps while the other fits the set before it: when sets come faster than the fitter, the stale
+ones are skipped (pending_frame_sets; counted in the next status_message and on /diagnostics) rather
+than queued. Each fit is published as /mvpose/skeleton (mvpose_msgs/Skeleton: joint
 poses, the 29 parameters, the six stages), the 29 parameters as /mvpose/joint_states
 (sensor_msgs/JointState), and /mvpose/skeleton_markers (visualization_msgs/MarkerArray in `world`, for
 RViz and Foxglove); the node's state and CPU per stage once a second on /diagnostics
@@ -43,36 +44,57 @@ class SkeletonFitterNode(MultiCameraNode):
         self.skeleton_publisher = self.create_publisher(Skeleton, '/mvpose/skeleton', LATCHED)
         self.joint_state_publisher = self.create_publisher(JointState, '/mvpose/joint_states', 10)
         self.marker_publisher = self.create_publisher(MarkerArray, '/mvpose/skeleton_markers', 10)
-        # Frame sets are fitted in a worker thread; while it is busy, at most pending_frame_sets wait (the
-        # oldest are skipped), so a fast input never builds a backlog.
+        # Two worker threads, a pipeline: 'preparing' makes a frame set's distance maps (OpenCV, without
+        # the GIL) while 'fitting' fits the one before (compiled, without the GIL), so the fitter's two
+        # halves use both cores. Before each, at most pending_frame_sets wait (the oldest are skipped), so
+        # a fast input never builds a backlog.
         self.pending = PendingSets(self.values['pending_frame_sets'])
+        self.prepared = PendingSets(self.values['pending_frame_sets'])
         self.counts = {'frame sets fitted': 0, 'frame sets skipped (stale)': 0, 'frame sets without a fit': 0}
         self.last_status = None
-        self.worker = threading.Thread(target=self.work, name='fitting', daemon=True)
-        self.diagnostics = NodeDiagnostics(self, self.state, [self.clock], {'fitting': self.worker})
-        self.worker.start()
+        self.workers = {name: threading.Thread(target=work, name=name, daemon=True)
+                        for name, work in (('preparing', self.preparing_loop), ('fitting', self.fitting_loop))}
+        self.diagnostics = NodeDiagnostics(self, self.state, [self.clock], self.workers)
+        for worker in self.workers.values():
+            worker.start()
         self.get_logger().info(f'fitting cameras {self.cameras}')
 
     def on_frame_set(self, frame_set):
         self.pending.put(frame_set)
 
-    def work(self):
-        reported_skips = 0
+    def preparing_loop(self):
+        """The 'preparing' thread: frame sets -> fitting's PreparedSets."""
         while not self.pending.closed:
             frame_set = self.pending.take(timeout=0.5)
             if frame_set is None:
                 continue
-            skipped, reported_skips = self.pending.skipped - reported_skips, self.pending.skipped
             try:
-                self.fit_and_publish(frame_set, skipped)
+                features = {number: (self.camera(number), frame_set.messages[(number, 'skin_ellipses')],
+                                     frame_set.messages[(number, 'labelled_contour')])
+                            for number in self.cameras if (number, 'labelled_contour') in frame_set.messages}
+                self.prepared.put(self.fitting.prepare(frame_set.stamp_ns, features, frame_set.missing_groups))
             except Exception as error:   # a bug must not stop the fitting: say it, drop the set, go on
-                self.get_logger().error(f'frame set {frame_set.stamp_ns} ns dropped: {type(error).__name__}: {error}')
+                self.drop(frame_set.stamp_ns, error)
 
-    def fit_and_publish(self, frame_set, skipped):
-        features = {number: (self.camera(number), frame_set.messages[(number, 'skin_ellipses')],
-                             frame_set.messages[(number, 'labelled_contour')])
-                    for number in self.cameras if (number, 'labelled_contour') in frame_set.messages}
-        result = self.fitting.fit(frame_set.stamp_ns, features, frame_set.missing_groups, skipped)
+    def fitting_loop(self):
+        """The 'fitting' thread: PreparedSets -> published skeletons."""
+        reported_skips = 0
+        while not self.prepared.closed:
+            prepared = self.prepared.take(timeout=0.5)
+            if prepared is None:
+                continue
+            skips = self.pending.skipped + self.prepared.skipped
+            skipped, reported_skips = skips - reported_skips, skips
+            try:
+                self.fit_and_publish(prepared, skipped)
+            except Exception as error:
+                self.drop(prepared.stamp_ns, error)
+
+    def drop(self, stamp_ns, error):
+        self.get_logger().error(f'frame set {stamp_ns} ns dropped: {type(error).__name__}: {error}')
+
+    def fit_and_publish(self, prepared, skipped):
+        result = self.fitting.fit_prepared(prepared, skipped)
         self.counts['frame sets skipped (stale)'] += skipped
         for cause, text in result.problems:
             self.report_once(cause, text)
@@ -99,7 +121,9 @@ class SkeletonFitterNode(MultiCameraNode):
 
     def destroy_node(self):
         self.pending.close()
-        self.worker.join(timeout=10)
+        self.prepared.close()
+        for worker in self.workers.values():
+            worker.join(timeout=10)
         super().destroy_node()
 
 

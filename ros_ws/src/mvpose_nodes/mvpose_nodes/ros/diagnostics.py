@@ -7,7 +7,7 @@ DiagnosticStatus named after the node, hardware_id the host, its level and messa
 values the node's own counters and the CPU seconds since the node started:
   cpu/process                   every thread of the process (time.process_time)
   cpu/thread/<name>             one thread (e.g. 'executor': rclpy's callbacks, taking and deserialising
-                                messages; 'fitting': the fitter's worker)
+                                messages; 'preparing' and 'fitting': the fitter's two workers)
   cpu/stage/<stage>, calls/<stage>   the StageClock stages (each within one of the threads)
 What no stage covers in a thread is rclpy's own work there (take, deserialise, executor); what no
 thread covers in the process is DDS's threads (transport, discovery) and the interpreter's.

@@ -29,6 +29,17 @@ class FrameSetResult:
     problems: list = None
 
 
+@dataclass
+class PreparedSet:
+    """One frame set ready to fit (FrameSetFitter.prepare): its stamp [ns], the fitter.Views of the cameras
+    with a person, problems [(cause, text)] met converting them, and the configured cameras the
+    synchroniser left out."""
+    stamp_ns: int
+    views: list
+    problems: list
+    missing_cameras: tuple = ()
+
+
 class FrameSetFitter:
     """The skeleton fitter behind the node: `settings` (fitting.settings.FitterSettings), the configured
     camera numbers, and the StageClock that counts the CPU of its stages ('conversion', 'distance maps',
@@ -43,7 +54,13 @@ class FrameSetFitter:
         """features: {camera number: (body.camera.Camera or None while its calibration is missing,
         SkinEllipseArray, LabelledContour)} of the cameras that sent this frame set; missing_cameras:
         configured cameras left out by the synchroniser (silent); skipped: frame sets skipped since the
-        last one (real time: fitting.sync.NewestOnly), said in the status_message. A FrameSetResult."""
+        last one (real time: fitting.sync.PendingSets), said in the status_message. A FrameSetResult."""
+        return self.fit_prepared(self.prepare(stamp_ns, features, missing_cameras), skipped)
+
+    def prepare(self, stamp_ns, features, missing_cameras=()):
+        """The first half of `fit` (same arguments): the messages converted into the views' evidence
+        (distance maps, outlines, keypoints). A PreparedSet for fit_prepared; the node runs the two
+        halves in two threads, so that one frame set's maps are made while the previous one is fitted."""
         problems, views = [], []
         for number in self.cameras:
             if number not in features:
@@ -61,6 +78,11 @@ class FrameSetFitter:
                 keypoints = keypoints_from_messages(ellipses, contour)
             with self.clock('distance maps'):
                 views.append(view_from_features(camera, keypoints, labels, ellipses.face_visibility, skin))
+        return PreparedSet(stamp_ns, views, problems, tuple(missing_cameras))
+
+    def fit_prepared(self, prepared, skipped=0):
+        """The second half of `fit`: the PreparedSet fitted. A FrameSetResult."""
+        stamp_ns, views, problems = prepared.stamp_ns, prepared.views, list(prepared.problems)
         skipped_text = f'{skipped} stale frame set(s) skipped before this one' if skipped else ''
         if len(views) < 2:
             return self.lost(stamp_ns, problems, 'few views',
@@ -71,7 +93,7 @@ class FrameSetFitter:
         except ValueError as error:
             return self.lost(stamp_ns, problems, 'fit', joined(f'no fit at {stamp_ns} ns: {error}', skipped_text))
         used = {v.camera.number for v in views}
-        degraded = bool(missing_cameras) or used != set(self.cameras) or not all(s.fitted for s in fit.stages)
+        degraded = bool(prepared.missing_cameras) or used != set(self.cameras) or not all(s.fitted for s in fit.stages)
         status = (Skeleton.STATUS_LOST if fit.lost else Skeleton.STATUS_INITIALISING if fit.initialised
                   else Skeleton.STATUS_DEGRADED if degraded else Skeleton.STATUS_OK)
         reason = joined(f'lost: the fit leaves {100 * fit.lost:.0f} % of the outline unexplained; re-initialising'

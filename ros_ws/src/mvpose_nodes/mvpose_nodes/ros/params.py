@@ -201,8 +201,8 @@ def multi_camera_parameters(what):
 
 SKELETON_FITTER = multi_camera_parameters(
     'features are fitted (each needs a camera_features in /cam<K>)') + (
-    Parameter('pending_frame_sets', 1, 'frame sets that may wait while the fitter is busy; when one more comes, '
-              'the oldest waiting is skipped, so the fit keeps to the newest (real time). 0: none is skipped, '
+    Parameter('pending_frame_sets', 1, 'frame sets that may wait while the fitter is busy, before each of its two '
+              'stages (distance maps, fit); when one more comes, the oldest waiting is skipped, so the fit keeps to the newest (real time). 0: none is skipped, '
               'every frame set is fitted in order (offline replays; the wait can grow)', range=(0, 1000),
               read_only=True),) + tuple(
     Parameter(f.name, f.default, f.metadata['description'], range=f.metadata['range'], read_only=True)

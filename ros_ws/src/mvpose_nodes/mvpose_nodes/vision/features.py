@@ -23,7 +23,8 @@ import numpy as np
 
 from mvpose_nodes.body.model import LABEL_NONE
 from mvpose_nodes.vision.contour import ContourLabels, label_contour
-from mvpose_nodes.vision.silhouette import BLUENESS_THRESHOLD, chroma_key_foreground, clean_mask, silhouette_keypoints
+from mvpose_nodes.vision.silhouette import (BLUENESS_THRESHOLD, chroma_key_foreground, clean_mask, component_box,
+                                              components, silhouette_keypoints)
 from mvpose_nodes.vision.skin import detect_skin, skin_regions
 
 ROLE_UNKNOWN, ROLE_FACE, ROLE_HAND, ROLE_FOREARM = range(4)   # SkinEllipse.ROLE_*
@@ -166,13 +167,13 @@ class FeatureExtractor:
         height, width = rgb.shape[:2]
         small = cv2.resize(rgb, (width // BOX_SCALE, height // BOX_SCALE), interpolation=cv2.INTER_NEAREST)
         foreground = self._foreground(small, (slice(0, height, BOX_SCALE), slice(0, width, BOX_SCALE)))
-        count, _, stats, _ = cv2.connectedComponentsWithStats(foreground.astype(np.uint8), connectivity=8)
-        if count < 2:
+        labels, areas = components(foreground)
+        if len(areas) < 2:
             return None
-        largest = 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
-        if stats[largest, cv2.CC_STAT_AREA] * BOX_SCALE ** 2 < min_person:
+        largest = 1 + int(np.argmax(areas[1:]))
+        if areas[largest] * BOX_SCALE ** 2 < min_person:
             return None
-        x, y, w, h = (int(v) * BOX_SCALE for v in stats[largest, :4])
+        x, y, w, h = (v * BOX_SCALE for v in component_box(labels, largest))
         margin = int(BOX_MARGIN * max(w, h)) + 2 * BOX_SCALE
         return max(x - margin, 0), max(y - margin, 0), min(x + w + margin, width), min(y + h + margin, height)
 

@@ -25,6 +25,23 @@ SHIN_BAND = (0.06, 0.18)  # above a foot's lowest pixel: mostly the shin, whose 
 KNEE_BAND = (0.285, 0.345)  # the knee joint lies at about 30 % of the stature
 
 
+def components(mask, connectivity=8):
+    """Connected components of a bool or uint8 (H, W) mask: labels int32 (H, W) (0: the background) and
+    the area of each label (n,) int64 [px]. cv2.connectedComponents and a bincount: OpenCV's
+    connectedComponentsWithStats takes 7 times as long here (1.8 against 0.26 ms on a 742×386 person box,
+    OpenCV 5.0), and its stats were the largest cost of the features; callers take the box of the one
+    component they keep (component_box)."""
+    count, labels = cv2.connectedComponents(mask.view(np.uint8), connectivity=connectivity)
+    return labels, np.bincount(labels.ravel(), minlength=count)
+
+
+def component_box(labels, label):
+    """(x, y, w, h) [px] of the pixels of `label` in labels (H, W): columns x to x + w − 1, rows y to y + h − 1."""
+    rows = np.flatnonzero((labels == label).any(axis=1))
+    columns = np.flatnonzero((labels == label).any(axis=0))
+    return int(columns[0]), int(rows[0]), int(columns[-1] - columns[0] + 1), int(rows[-1] - rows[0] + 1)
+
+
 def chroma_key_foreground(rgb, threshold=BLUENESS_THRESHOLD):
     """Pixels that are not blue screen: b − max(r, g) <= threshold. (H, W) bool."""
     red, green, blue = cv2.split(rgb)
@@ -106,21 +123,20 @@ def clean_mask(foreground, min_area=MIN_PERSON_AREA, opening=2, closing=4, max_h
         mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, _disk(opening))
     if closing:
         mask = cv2.morphologyEx(mask, cv2.MORPH_CLOSE, _disk(closing))
-    count, labels, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
-    if count < 2:
+    labels, areas = components(mask)
+    if len(areas) < 2:
         return np.zeros(foreground.shape, bool)
-    largest = 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
-    if stats[largest, cv2.CC_STAT_AREA] < min_area:
+    largest = 1 + int(np.argmax(areas[1:]))
+    if areas[largest] < min_area:
         return np.zeros(foreground.shape, bool)
-    x, y, w, h = (stats[largest, i] for i in (cv2.CC_STAT_LEFT, cv2.CC_STAT_TOP, cv2.CC_STAT_WIDTH,
-                                               cv2.CC_STAT_HEIGHT))
+    x, y, w, h = component_box(labels, largest)
     blob = (labels[y:y + h, x:x + w] == largest).astype(np.uint8)
     # Holes: background components of the box that do not touch its border.
     padded = cv2.copyMakeBorder(1 - blob, 1, 1, 1, 1, cv2.BORDER_CONSTANT, value=1)
-    count, holes, hole_stats, _ = cv2.connectedComponentsWithStats(padded, connectivity=4)
+    holes, hole_areas = components(padded, connectivity=4)
     outside = holes[0, 0]
-    small = [i for i in range(1, count) if i != outside
-             and hole_stats[i, cv2.CC_STAT_AREA] <= max_hole_fraction * stats[largest, cv2.CC_STAT_AREA]]
+    small = [i for i in range(1, len(hole_areas)) if i != outside
+             and hole_areas[i] <= max_hole_fraction * areas[largest]]
     filled = blob.astype(bool) | np.isin(holes[1:-1, 1:-1], small)
     person = np.zeros(foreground.shape, bool)
     person[y:y + h, x:x + w] = filled
@@ -173,9 +189,9 @@ def _legs(mask, bottom_row, height):
     part (legs crossing or together), that part is split at its median column."""
     cut = int(round(bottom_row - LEG_CUT * height))
     below = mask[cut:bottom_row + 1].astype(np.uint8)
-    count, labels, stats, _ = cv2.connectedComponentsWithStats(below, connectivity=8)
-    parts = sorted(range(1, count), key=lambda i: -stats[i, cv2.CC_STAT_AREA])[:2]
-    parts = [p for p in parts if stats[p, cv2.CC_STAT_AREA] > 0.1 * stats[parts[0], cv2.CC_STAT_AREA]]
+    labels, areas = components(below)
+    parts = sorted(range(1, len(areas)), key=lambda i: -areas[i])[:2]
+    parts = [p for p in parts if areas[p] > 0.1 * areas[parts[0]]]
     legs = []
     if len(parts) == 2:
         for part in parts:

@@ -14,6 +14,8 @@ import zipfile
 import cv2
 import numpy as np
 
+from mvpose_nodes.vision.silhouette import component_box, components
+
 
 class SkinModelError(ValueError):
     """A skin colour model file that is missing or malformed; the message names the file."""
@@ -155,12 +157,6 @@ def _disk(radius):
     return cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1, 2 * radius + 1))
 
 
-def _components(mask):
-    """8-connected components of a bool mask: (labels int32 (H, W), stats (n, 5), centroids (n, 2))."""
-    _, labels, stats, centroids = cv2.connectedComponentsWithStats(mask.view(np.uint8), connectivity=8)
-    return labels, stats, centroids
-
-
 def detect_skin(model, rgb, threshold=0.0, region=None, min_area=30, opening=1, closing=2):
     """Skin mask, bool (H, W), of an RGB uint8 (H, W, 3) image (paper 000 Sec. 3.2).
 
@@ -192,8 +188,8 @@ def detect_skin(model, rgb, threshold=0.0, region=None, min_area=30, opening=1, 
         skin &= inside  # closing may bridge into concavities of the region
     skin = skin.view(bool)
     if min_area > 1:
-        labels, stats, _ = _components(skin)
-        large = stats[:, cv2.CC_STAT_AREA] >= min_area
+        labels, areas = components(skin)
+        large = areas >= min_area
         large[0] = False  # label 0 is the background
         skin = large[labels]
     mask = np.zeros((height, width), bool)
@@ -215,17 +211,19 @@ class SkinRegion:
 
 def skin_regions(mask, min_area=30):
     """The 8-connected regions of a bool (H, W) skin mask with at least min_area px, largest first."""
-    labels, stats, centroids = _components(mask)
+    labels, areas = components(mask)
     regions = []
-    for label in np.flatnonzero(stats[:, cv2.CC_STAT_AREA] >= min_area):
+    for label in np.flatnonzero(areas >= min_area):
         if label == 0:
             continue
-        x, y, w, h, area = (int(v) for v in stats[label])
+        x, y, w, h = component_box(labels, label)
         # One pixel of padding so the contour of a region touching the crop edge is traced in full.
         crop = np.pad(labels[y:y + h, x:x + w] == label, 1).view(np.uint8)
+        rows, columns = np.nonzero(crop)
+        centroid = np.array([columns.mean() + x - 1, rows.mean() + y - 1])
         contours, _ = cv2.findContours(crop, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
         outer = max(contours, key=len).reshape(-1, 2) + (x - 1, y - 1)
-        regions.append(SkinRegion(int(label), area, (x, y, w, h), centroids[label].copy(), outer.astype(np.int32)))
+        regions.append(SkinRegion(int(label), int(areas[label]), (x, y, w, h), centroid, outer.astype(np.int32)))
     return sorted(regions, key=lambda region: -region.area)
 
 
