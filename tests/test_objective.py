@@ -81,7 +81,7 @@ def test_distance_maps_match_brute_force_on_random_segments():
 
 def test_outside_the_maps_distance_grows_with_the_distance_to_the_box():
     maps = boundary_distances(arm_contour(), IMAGE_SIZE)
-    x0 = maps.origins[LABEL_LEFT_ARM][0]
+    x0 = maps.origin[0]
     # Straight left of the box the nearest SIDE_A pixel lies straight inward: the extrapolation is exact.
     points = np.array([[x0 - 30.0, 250.0], [x0 - 0.5, 250.0], [x0 + 10.0, 250.0]])
     assert maps.distances(LABEL_LEFT_ARM, SIDE_A, points) == pytest.approx(ARM_SIDES_X[0] - points[:, 0],

@@ -92,24 +92,6 @@ def decode_times(frame_sets):
     return times, shape
 
 
-def load_truth(bag, stamps):
-    """{stamp: true joints (15, 3) [m]} of the bag's /mvpose/ground_truth at `stamps` (empty if it has none)."""
-    from rclpy.serialization import deserialize_message
-    from mvpose_msgs.msg import Skeleton
-    from mvpose_nodes.io.bagfile import BagReader
-    from mvpose_nodes.ros.camera_bag import GROUND_TRUTH_TOPIC
-    from mvpose_nodes.ros.conversions import joints_from_skeleton, stamp_ns
-    reader = BagReader(bag)
-    if GROUND_TRUTH_TOPIC not in reader.topics:
-        return {}
-    truth = {}
-    for _, _, data in reader.messages(topics=[GROUND_TRUTH_TOPIC]):
-        message = deserialize_message(data, Skeleton)
-        if stamp_ns(message.header) in stamps:
-            truth[stamp_ns(message.header)] = joints_from_skeleton(message)
-    return truth
-
-
 def run_bench(bag, window, rate, limit, log_path):
     import rclpy
     from diagnostic_msgs.msg import DiagnosticArray
@@ -118,7 +100,8 @@ def run_bench(bag, window, rate, limit, log_path):
     from geometry_msgs.msg import PoseStamped
     from mvpose_msgs.msg import LabelledContour, Skeleton
     from mvpose_nodes.tools.bag import wait_for_subscribers
-    from mvpose_nodes.ros.camera_bag import SKELETON_TOPIC
+    from mvpose_nodes.app.fit import skeletons
+    from mvpose_nodes.ros.camera_bag import GROUND_TRUTH_TOPIC, SKELETON_TOPIC
     from mvpose_nodes.app.graph_run import GRAPH_CAMERAS, wait_for_connections, launch_file
     from mvpose_nodes.tools.launch import Launch, load_launch_file
     from mvpose_nodes.app.progress import Progress
@@ -128,7 +111,12 @@ def run_bench(bag, window, rate, limit, log_path):
 
     cameras = tuple(GRAPH_CAMERAS)
     calibration, frame_sets = load_frame_sets(bag, cameras, limit)
-    truth = load_truth(bag, {stamp for stamp, _ in frame_sets}) if rate is not None else {}
+    truth = {}
+    if rate is not None:   # open loop: the fitted frame sets' error against the bag's truth, if it has one
+        try:
+            truth = skeletons(bag, GROUND_TRUTH_TOPIC)
+        except UserError:
+            pass
     print(f'[bench] decoding the {len(frame_sets) * len(cameras)} images of {len(frame_sets)} frame sets here '
           'for the decode-only floor', file=sys.stderr, flush=True)
     decode_ms, shape = decode_times(frame_sets)

@@ -85,7 +85,8 @@ class FramePack(NamedTuple):
     outside_origin (V, 2) (x0, y0) [px]. Boundary maps (objective.BoundaryDistances) of MAP_LABELS: slot
     (V, 4) bool (the part has both sides), boundary (M,) float32 the views' BoundaryDistances.buffer (one
     after the other, unless they share one), boundary_at (V, 4, 2) each side's map's first index in it,
-    boundary_shape, boundary_origin (V, 4, 2), boundary_width (V, 4) [px]."""
+    boundary_shape (V, 2) (height, width) and boundary_origin (V, 2) (x0, y0) [px] of the view's maps (they
+    share one box), boundary_width (V, 4) [px]."""
     K: np.ndarray
     R: np.ndarray
     t: np.ndarray
@@ -151,15 +152,17 @@ def pack_frame(views):
     count, labels = len(views), len(MAP_LABELS)
     outside, outside_at = _joined([v.outline.outside if v.outline is not None else None for v in views])
     boundary, boundary_start = _joined([v.distances.buffer if v.distances is not None else None for v in views])
-    slot, width = np.zeros((count, labels), np.bool_), np.zeros((count, labels))
-    at, shape, origin = (np.zeros((count, labels, 2), dtype) for dtype in (np.int64, np.int64, np.float64))
+    slot, width, at = np.zeros((count, labels), np.bool_), np.zeros((count, labels)), np.zeros((count, labels, 2), np.int64)
+    shape, origin = np.zeros((count, 2), np.int64), np.zeros((count, 2))
     for v, view in enumerate(views):
         distances = view.distances
+        if distances is None or not distances.maps:
+            continue
+        origin[v], shape[v] = distances.origin, next(iter(distances.maps.values())).shape
         for k, label in enumerate(MAP_LABELS):
-            if distances is None or label not in distances.widths:
+            if label not in distances.widths:
                 continue
-            slot[v, k], width[v, k], origin[v, k] = True, distances.widths[label], distances.origins[label]
-            shape[v, k] = distances.maps[(label, SIDE_A)].shape
+            slot[v, k], width[v, k] = True, distances.widths[label]
             at[v, k] = (boundary_start[v] + distances.offsets[(label, SIDE_A)],
                         boundary_start[v] + distances.offsets[(label, SIDE_B)])
     return FramePack(
@@ -210,6 +213,20 @@ def _bilinear(buffer, at, height, width, x, y):
     top = v00 + fx * (v01 - v00)
     bottom = v10 + fx * (v11 - v10)
     return top + fy * (bottom - top) + np.hypot(x - cx, y - cy)
+
+
+@njit(cache=True, nogil=True, error_model='numpy')
+def _capsule_residual(x, y, start, end, radius, terminal):
+    """objective.capsule_residuals of one point (x, y) [px] and one capsule: its distance to the segment
+    start–end (2,) [px] less the radius [px]; inf beyond the end of a terminal capsule."""
+    ax, ay = end[0] - start[0], end[1] - start[1]
+    ox, oy = x - start[0], y - start[1]
+    along = (ox * ax + oy * ay) / (ax * ax + ay * ay + 1e-9)
+    if along > 1.0 and terminal:
+        return np.inf
+    clamped = min(max(along, 0.0), 1.0)
+    gx, gy = ox - clamped * ax, oy - clamped * ay
+    return np.sqrt(gx * gx + gy * gy) - radius
 
 
 @njit(cache=True, nogil=True, error_model='numpy')
@@ -264,14 +281,8 @@ def stage_objective(values, stage, frame, bone_lengths, fractions, samples, used
                     continue
                 nearest = np.inf
                 for k in range(capsule_count):
-                    ax, ay = ends[k, 0] - starts[k, 0], ends[k, 1] - starts[k, 1]
-                    ox, oy = stage.points[p, 0] - starts[k, 0], stage.points[p, 1] - starts[k, 1]
-                    along = (ox * ax + oy * ay) / (ax * ax + ay * ay + 1e-9)
-                    if along > 1.0 and stage.capsule_terminal[k]:
-                        continue
-                    clamped = min(max(along, 0.0), 1.0)
-                    gx, gy = ox - clamped * ax, oy - clamped * ay
-                    nearest = min(nearest, np.sqrt(gx * gx + gy * gy) - radii[k])
+                    nearest = min(nearest, _capsule_residual(stage.points[p, 0], stage.points[p, 1], starts[k],
+                                                             ends[k], radii[k], stage.capsule_terminal[k]))
                 e = min(nearest, w[4]) / w[3]
                 outline += w[3] * w[3] * np.log1p(e * e)
         # Eq. 4–5 with the enclosure term for the stage's labelled bones (objective.limb_cost).
@@ -282,8 +293,8 @@ def stage_objective(values, stage, frame, bone_lengths, fractions, samples, used
                 continue
             used[v] = True
             at_a, at_b = frame.boundary_at[v, slot, 0], frame.boundary_at[v, slot, 1]
-            height, width = frame.boundary_shape[v, slot, 0], frame.boundary_shape[v, slot, 1]
-            ox, oy = frame.boundary_origin[v, slot, 0], frame.boundary_origin[v, slot, 1]
+            height, width = frame.boundary_shape[v, 0], frame.boundary_shape[v, 1]
+            ox, oy = frame.boundary_origin[v, 0], frame.boundary_origin[v, 1]
             sum1 = sum2 = enclosure = 0.0
             for s in range(len(fractions)):
                 x = pixels[a, 0] + fractions[s] * (pixels[b, 0] - pixels[a, 0]) - ox
@@ -321,14 +332,7 @@ def nearest_capsules(points, starts, ends, radii, terminal):
     nearest, residual = np.zeros(count, np.int64), np.full(count, np.inf)
     for p in range(count):
         for k in range(starts.shape[0]):
-            ax, ay = ends[k, 0] - starts[k, 0], ends[k, 1] - starts[k, 1]
-            ox, oy = points[p, 0] - starts[k, 0], points[p, 1] - starts[k, 1]
-            along = (ox * ax + oy * ay) / (ax * ax + ay * ay + 1e-9)
-            if along > 1.0 and terminal[k]:
-                continue
-            clamped = min(max(along, 0.0), 1.0)
-            gx, gy = ox - clamped * ax, oy - clamped * ay
-            distance = np.sqrt(gx * gx + gy * gy) - radii[k]
+            distance = _capsule_residual(points[p, 0], points[p, 1], starts[k], ends[k], radii[k], terminal[k])
             if distance < residual[p]:
                 nearest[p], residual[p] = k, distance
     return nearest, residual

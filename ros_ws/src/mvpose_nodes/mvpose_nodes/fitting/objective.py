@@ -36,15 +36,15 @@ class BoundaryDistances:
     """One camera's distance maps for one frame.
 
     maps: (label, side) -> (H, W) float32 [px], the Euclidean distance from each pixel to the nearest
-    contour pixel of that part and side (only (label, side) pairs that have pixels are present); origins:
-    label -> (x0, y0) [px], the image pixel of element [0, 0] of the label's two maps (the contour's
-    bounding box grown by MAP_MARGIN_PX, clipped to the image). widths: label -> float [px], the Hausdorff
+    contour pixel of that part and side (only (label, side) pairs that have pixels are present), all of
+    one shape; origin: (x0, y0) [px], the image pixel of every map's element [0, 0] (all maps share one
+    box: the contour's bounding box grown by MAP_MARGIN_PX, clipped to the image). widths: label -> float [px], the Hausdorff
     distance between the part's two boundaries: the widest the part gets (for the enclosure term).
     buffer: (N,) float32, every map flattened one after the other (the maps are views of it; compiled.py
     reads them there without copying), offsets: (label, side) -> the index of the map's first element.
     """
     maps: dict
-    origins: dict
+    origin: tuple
     widths: dict
     buffer: np.ndarray = field(default_factory=lambda: np.zeros(0, np.float32), compare=False, repr=False)
     offsets: dict = field(default_factory=dict)
@@ -54,12 +54,10 @@ class BoundaryDistances:
         the wrong way round)."""
         exchange = {label_a: label_b, label_b: label_a}
 
-        def relabelled(by_label):
-            return {exchange.get(label, label): value for label, value in by_label.items()}
-
         def relabelled_sides(by_side):
             return {(exchange.get(label, label), side): value for (label, side), value in by_side.items()}
-        return BoundaryDistances(relabelled_sides(self.maps), relabelled(self.origins), relabelled(self.widths),
+        return BoundaryDistances(relabelled_sides(self.maps), self.origin,
+                                 {exchange.get(label, label): width for label, width in self.widths.items()},
                                  self.buffer, relabelled_sides(self.offsets))
 
     def distances(self, label, side, points):
@@ -70,7 +68,7 @@ class BoundaryDistances:
         upper bound of the true distance, exact when the nearest boundary pixel lies straight inward from
         the box edge (the margin makes that typical), and never small for a segment far off the part.
         """
-        return bilinear(self.maps[(label, side)], np.asarray(points, dtype=float) - self.origins[label])
+        return bilinear(self.maps[(label, side)], np.asarray(points, dtype=float) - self.origin)
 
     def both_sides(self, label, points):
         """(distances to SIDE_A, distances to SIDE_B) of points (M, 2)."""
@@ -111,14 +109,14 @@ def boundary_distances(contour_labels, image_size, labels=None, margin=MAP_MARGI
     if labels is None:
         labels = set(part_labels[sides == SIDE_A].tolist()) & set(part_labels[sides == SIDE_B].tolist())
     if not len(points):
-        return BoundaryDistances({}, {}, {})
+        return BoundaryDistances({}, (0, 0), {})
     x0, y0 = np.maximum(points.min(axis=0) - margin, 0)
     x1, y1 = np.minimum(points.max(axis=0) + margin, np.subtract(image_size, 1))
     shape = (int(y1 - y0 + 1), int(x1 - x0 + 1))
     present = [(label, side) for label in labels for side in (SIDE_A, SIDE_B)
                if np.any((part_labels == label) & (sides == side))]
     buffer = np.empty(len(present) * shape[0] * shape[1], np.float32)
-    maps, origins, widths, offsets, side_pixels = {}, {}, {}, {}, {}
+    maps, widths, offsets, side_pixels = {}, {}, {}, {}
     for index, (label, side) in enumerate(present):
         pixels = points[(part_labels == label) & (sides == side)] - (x0, y0)
         coarse = np.ones((-(-shape[0] // MAP_COARSENING), -(-shape[1] // MAP_COARSENING)), np.uint8)
@@ -128,14 +126,13 @@ def boundary_distances(contour_labels, image_size, labels=None, margin=MAP_MARGI
         coarse_map = cv2.distanceTransform(coarse, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
         coarse_map *= MAP_COARSENING
         cv2.resize(coarse_map, shape[::-1], dst=maps[(label, side)], interpolation=cv2.INTER_LINEAR)
-        origins[label] = (int(x0), int(y0))
         side_pixels[(label, side)] = pixels
     for label in labels:
         if (label, SIDE_A) in maps and (label, SIDE_B) in maps:
             a, b = side_pixels[(label, SIDE_A)], side_pixels[(label, SIDE_B)]
             widths[label] = float(max(maps[(label, SIDE_B)][a[:, 1], a[:, 0]].max(),
                                       maps[(label, SIDE_A)][b[:, 1], b[:, 0]].max()))
-    return BoundaryDistances(maps, origins, widths, buffer, offsets)
+    return BoundaryDistances(maps, (int(x0), int(y0)), widths, buffer, offsets)
 
 
 def segment_points(a, b, n=SEGMENT_POINTS):

@@ -124,11 +124,12 @@ class CameraFeaturesNode(ReportOnce, Node):
         """silhouette: (H, W) bool, the person's pixels."""
         # The silhouettes are for people and tools to look at (the fitter reads the contour): made only
         # while something subscribes, as image_transport publishes.
+        wanted = [(publisher, make) for publisher, make in (
+            (self.compressed_silhouette_publisher, png_mono), (self.silhouette_publisher, mono_image))
+            if publisher.get_subscription_count()]
         with self.clock('conversion'):
-            mask = silhouette.astype(np.uint8) * 255
-            silhouettes = [(publisher, make(mask, header)) for publisher, make in (
-                (self.compressed_silhouette_publisher, png_mono), (self.silhouette_publisher, mono_image))
-                if publisher.get_subscription_count()]
+            mask = silhouette.astype(np.uint8) * 255 if wanted else None
+            silhouettes = [(publisher, make(mask, header)) for publisher, make in wanted]
         with self.clock('publish'):
             for publisher, message in silhouettes:
                 publisher.publish(message)
