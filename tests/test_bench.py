@@ -107,9 +107,11 @@ def test_backlog_growth_compares_the_first_and_last_quarter():
 def test_open_loop_table_reports_share_fitted_skips_and_error():
     sent = {1: 0.0, 2: 0.04, 3: 0.08, 4: 0.12}
     result = bench.BenchResult('bags/x', (3, 5, 7), 1920, 1080, 2, 4, rate=1.0, sent=sent,
-                               skeletons={1: (0.1, 0.05), 3: (0.2, 0.05)}, skipped=2, errors_mm={1: 30.0, 3: 40.0},
+                               skeletons={1: (0.1, 0.05), 3: (0.2, 0.05)}, skipped=2, overtaken=1, dropped=1,
+                               errors_mm={1: 30.0, 3: 40.0},
                                decode_ms=[4.0] * 12, split={'skeleton_fitter': {'fit': 0.2, 'total': 0.4}})
     table = bench.format_table(result)
     assert "open loop at 1× the bag's speed: 2 of 4 frame sets fitted (50 %), 2 skipped by the fitter as stale" in table
+    assert '(2 of 4 fitted, 1 passed over (a later one was fitted), 1 dropped (no answer in 60 s))' in table
     assert 'mean joint error of the fitted frame sets: 35 mm (2 with ground truth)' in table
     assert re.search(r'skeleton_fitter\s+fit 50\.0\s+total 100\.0', table)      # ms per frame set sent

@@ -10,9 +10,10 @@ from common import Publisher, run_mvpose, spin_for, spin_until
 from mvpose_msgs.msg import LabelledContour, SkinEllipseArray
 from rclpy.qos import DurabilityPolicy, QoSProfile
 from sensor_msgs.msg import CameraInfo, CompressedImage, Image
+from std_msgs.msg import Header
 
 from mvpose_nodes.ros.camera_bag import frame_stamp_ns
-from mvpose_nodes.ros.conversions import image_from_compressed, stamp_ns
+from mvpose_nodes.ros.conversions import image_from_compressed, set_stamp, stamp_ns
 
 pytestmark = pytest.mark.dds
 
@@ -80,6 +81,46 @@ def test_node_publishes_every_feature_with_the_source_stamps(small_bag, features
     ellipses = listener.received['skin_ellipses'][0]
     assert ellipses.status == SkinEllipseArray.STATUS_OK and ellipses.ellipses
     assert {k.name for k in ellipses.keypoints} >= {'head', 'neck'}
+
+
+def test_with_a_requester_the_node_announces_every_image_and_computes_only_the_requested(
+        small_bag, features_node, ros_context):
+    """Issue 14: while something publishes frame_request (the skeleton_fitter), each image is only
+    announced on frame_available; features come for the stamps requested, the older held images are
+    skipped and counted, and a request for an image not held is not answered."""
+    from diagnostic_msgs.msg import DiagnosticArray
+    listener = Listener()
+    announced, diagnostics = [], []
+    listener.node.create_subscription(Header, '/cam3/frame_available', announced.append, 50)
+    listener.node.create_subscription(DiagnosticArray, '/diagnostics', diagnostics.append, 50)
+    requests = Publisher(listener.node, Header, '/cam3/frame_request', 10)
+    stamps = [frame_stamp_ns(n) for n in range(FRAMES[0], FRAMES[1] + 1)]
+
+    def request(stamp):
+        requests.publish(set_stamp(Header(), stamp, 'cam3_optical_frame'))
+    try:
+        listener.wait_for_node()
+        requests.wait_for_subscribers()
+        spin_for(listener.node, 1.0)   # the node sees its requester
+        run_mvpose('bag', 'play', small_bag, '--topics', '/cam3/image_raw/compressed', '/cam3/camera_info',
+                   '--wait-for-subscribers', '--delay', 0.5, timeout=120)
+        spin_until(listener.node, lambda: len(announced) == len(stamps), 30, 'every image announced')
+        spin_for(listener.node, 1.0)
+        assert listener.received['labelled_contour'] == [], 'no features before a request'
+        request(stamps[1])
+        spin_until(listener.node, lambda: listener.received['labelled_contour'], 30, 'the requested features')
+        request(stamps[0])   # passed over when stamps[1] was requested: no longer held
+        spin_for(listener.node, 1.0)
+        spin_until(listener.node, lambda: any(v.key == 'images not requested' and v.value == '1'
+                                              for array in diagnostics for status in array.status
+                                              for v in status.values), 10, 'one image counted as not requested')
+    finally:
+        listener.close()
+    assert [stamp_ns(m) for m in announced] == stamps
+    assert all(m.frame_id == 'cam3_optical_frame' for m in announced)
+    for name in ('labelled_contour', 'skin_ellipses'):
+        assert [stamp_ns(m.header) for m in listener.received[name]] == [stamps[1]], name
+    assert listener.received['labelled_contour'][0].status == LabelledContour.STATUS_OK
 
 
 def test_bad_input_is_answered_with_a_status_and_the_node_keeps_running(features_node, ros_context):

@@ -1,11 +1,13 @@
-"""The fitter's real-time queue (fitting.sync.PendingSets) and the per-stage CPU clock (ros.diagnostics):
-pure tests with threads. The skeleton_fitter node skipping stale frame sets over DDS: test_real_time.py."""
+"""The fitter's real-time queue (fitting.sync.PendingSets), its frame requests (fitting.sync.FrameRequests)
+and the per-stage CPU clock (ros.diagnostics): pure tests, some with threads. Over DDS: the
+skeleton_fitter skipping stale frame sets in test_skeleton_fitter_node.py, a camera following requests
+in test_camera_features_node.py."""
 import threading
 import time
 
 import pytest
 
-from mvpose_nodes.fitting.sync import PendingSets
+from mvpose_nodes.fitting.sync import FrameRequests, PendingSets, SyncedSet
 from mvpose_nodes.ros.diagnostics import StageClock, thread_cpu_seconds
 
 pytestmark = pytest.mark.pure
@@ -70,3 +72,34 @@ def test_stage_clock_counts_the_calling_threads_cpu_not_its_sleep():
     assert seconds['spin'] >= 0.05 and seconds['sleep'] < 0.01
     assert clock.snapshot()['spin'][1] == 1
     assert thread_cpu_seconds(threading.current_thread()) >= 0.05
+
+
+def announced(stamp_ms, cameras=(3, 5, 7)):
+    """A SyncedSet of announcements, each camera 1 ms after the one before."""
+    stamps = {(k, 'frame_available'): (stamp_ms + i) * 10**6 for i, k in enumerate(cameras)}
+    return SyncedSet(max(stamps.values()), dict(stamps), stamps, frozenset())
+
+
+def test_requests_ask_for_the_newest_announced_set_once_ready_and_count_the_passed_over():
+    requests = FrameRequests(timeout=1.0)
+    assert requests.next_request(0.0, ready=True) is None, 'nothing announced'
+    for stamp in (0, 40, 80):
+        requests.announce(announced(stamp))
+    assert requests.next_request(0.0, ready=False) is None, 'the fitter is busy'
+    assert requests.next_request(0.1, ready=True) == announced(80) and requests.skipped == 2
+    requests.announce(announced(120))
+    assert requests.next_request(0.2, ready=True) is None, 'one request outstanding at a time'
+    requests.received(82 * 10**6)   # the features of the set requested (its newest stamp)
+    assert requests.next_request(0.2, ready=True) == announced(120) and requests.skipped == 2
+    assert requests.next_request(0.3, ready=True) is None, 'each announced set requested once'
+
+
+def test_a_request_without_an_answer_is_given_up_after_the_timeout():
+    requests = FrameRequests(timeout=1.0)
+    requests.announce(announced(0))
+    assert requests.next_request(10.0, ready=True) == announced(0)
+    requests.received(-1)   # an older set does not answer it
+    requests.announce(announced(40))
+    assert requests.next_request(10.9, ready=True) is None and requests.unanswered == 0
+    assert requests.next_request(11.1, ready=True) == announced(40) and requests.unanswered == 1
+    assert requests.skipped == 0

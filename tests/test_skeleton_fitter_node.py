@@ -1,8 +1,9 @@
 """The skeleton_fitter node over DDS, fed features computed here from rendered studio views: a frame set
 that two cameras see is fitted; one that only one camera sees gets STATUS_LOST with the last pose. Bad
 calibration and malformed contours are logged and dropped, and the node keeps running. Features that come
-before their camera's calibration wait for it."""
+before their camera's calibration wait for it. It asks the cameras for the frame sets it will fit."""
 import math
+import time
 
 import numpy as np
 import pytest
@@ -195,5 +196,49 @@ def test_frame_sets_faster_than_the_fitter_skip_the_stale_ones(rendered_features
     assert fitted == sorted(set(fitted)) and set(fitted) <= set(stamps[1:]), 'in order, each at most once'
     assert len(fitted) + skipped == BURST, 'every frame set fitted or counted as skipped'
     assert skipped >= 1, 'the burst came faster than the fitter'
+    code, _, err = fitter.interrupt()
+    assert code == 0, err
+
+
+def test_the_fitter_requests_the_newest_announced_frame_set_one_at_a_time(ros_context, background):
+    """Issue 14, over DDS: the fitter asks every camera for the newest frame set they announced, once
+    nothing waits before its stages; while a request is unanswered it asks for nothing more, and after
+    camera_timeout it gives the request up (counted on /diagnostics) and asks for the newest again,
+    passing over the sets announced in between."""
+    from diagnostic_msgs.msg import DiagnosticArray
+    from std_msgs.msg import Header
+    fitter = background('run', 'skeleton_fitter', '--ros-args', '-p', f'cameras:={list(CAMERAS)}',
+                        '-p', 'camera_timeout:=1.0')
+    node = rclpy.create_node('fake_cameras')
+    requested, diagnostics = {k: [] for k in CAMERAS}, []
+    for k in CAMERAS:
+        node.create_subscription(Header, f'/cam{k}/frame_request', requested[k].append, 10)
+    node.create_subscription(DiagnosticArray, '/diagnostics', diagnostics.append, 100)
+    announcers = {k: Publisher(node, Header, f'/cam{k}/frame_available', 10) for k in CAMERAS}
+    stamps = [frame_stamp_ns(60 + i) for i in range(3)]
+
+    def announce(stamp):
+        for k, announcer in announcers.items():
+            announcer.publish(set_stamp(Header(), stamp, optical_frame(k)))
+    try:
+        spin_until(node, lambda: all(node.count_publishers(f'/cam{k}/frame_request') for k in CAMERAS), 60,
+                   "the fitter's frame_request publishers")
+        spin_for(node, 0.5)
+        announce(stamps[0])
+        spin_until(node, lambda: all(requested.values()), 30, 'a request to every camera')
+        started = time.monotonic()
+        announce(stamps[1])
+        announce(stamps[2])
+        spin_until(node, lambda: all(len(r) == 2 for r in requested.values()), 30, 'the second request')
+        waited = time.monotonic() - started
+        spin_until(node, lambda: any(v.key == 'frame requests unanswered' and v.value == '1'
+                                     for array in diagnostics for status in array.status for v in status.values),
+                   10, '/diagnostics counting the unanswered request')
+    finally:
+        node.destroy_node()
+    for k in CAMERAS:
+        assert [stamp_ns(h) for h in requested[k]] == [stamps[0], stamps[2]], f'camera {k}: the newest, once'
+        assert requested[k][0].frame_id == optical_frame(k)
+    assert waited > 0.8, 'the second request waits for the first to be answered or given up'
     code, _, err = fitter.interrupt()
     assert code == 0, err

@@ -23,7 +23,9 @@ so a silent group is noticed only while others keep producing, and the result is
 the same when replaying a bag at any speed.
 
 HeldSets keeps sets back until their cameras' calibration is in; PendingSets hands the newest sets to a
-worker that is slower than the input (PendingSets: beyond its depth, the oldest are skipped and counted).
+worker that is slower than the input (PendingSets: beyond its depth, the oldest are skipped and counted);
+FrameRequests picks which announced frame set to ask the cameras for when the worker is ready, so that
+frames are skipped before any camera computes their features, and by every camera alike.
 """
 import bisect
 import collections
@@ -196,6 +198,11 @@ class PendingSets:
                 self.skipped += 1
             self._condition.notify()
 
+    def __len__(self):
+        """How many wait."""
+        with self._condition:
+            return len(self._waiting)
+
     def take(self, timeout):
         """The oldest waiting item, or None after `timeout` [s] without one, or once closed."""
         with self._condition:
@@ -206,3 +213,52 @@ class PendingSets:
         with self._condition:
             self.closed = True
             self._condition.notify_all()
+
+
+class FrameRequests:
+    """Frame sets by request (real time without wasted work): the cameras announce each image's stamp, an
+    ApproximateTimeSynchronizer makes sets of the announcements, and when the fitter is ready for another
+    frame set (nothing waits before its stages) it asks the cameras for the newest announced set. The sets
+    announced in between are skipped (counted) before any camera has computed their features, and every
+    camera skips the same ones, so no camera's work is wasted on a set that another camera left out.
+
+    One request is outstanding at a time: it is answered when a frame set at or after its oldest stamp
+    arrives, and given up (counted) after `timeout` seconds without one, so a lost message or a camera
+    that missed its image stalls the requests for that long only. Times are float [s] from one monotonic
+    clock; stamps int [ns]."""
+
+    def __init__(self, timeout):
+        self.timeout = timeout
+        self.newest = None            # the newest announced SyncedSet not yet requested
+        self.since_request = 0        # sets announced since the last request
+        self.outstanding = None       # (oldest stamp [ns] of the requested set, time of the request [s])
+        self.skipped = 0              # announced sets never requested (a newer one was)
+        self.unanswered = 0           # requests given up after `timeout`
+        self._lock = threading.Lock()
+
+    def announce(self, synced):
+        """A SyncedSet of the cameras' announcements (stamps_ns keyed by channel, one per camera)."""
+        with self._lock:
+            self.newest = synced
+            self.since_request += 1
+
+    def received(self, stamp_ns):
+        """A frame set of features came, stamped stamp_ns (the newest of its stamps)."""
+        with self._lock:
+            if self.outstanding is not None and stamp_ns >= self.outstanding[0]:
+                self.outstanding = None
+
+    def next_request(self, now, ready):
+        """The SyncedSet to request now, or None: while the consumer is not `ready`, a request is
+        outstanding, or nothing new was announced."""
+        with self._lock:
+            if self.outstanding is not None and now - self.outstanding[1] > self.timeout:
+                self.outstanding = None
+                self.unanswered += 1
+            if not ready or self.outstanding is not None or self.newest is None:
+                return None
+            requested, self.newest = self.newest, None
+            self.skipped += self.since_request - 1
+            self.since_request = 0
+            self.outstanding = (min(requested.stamps_ns.values()), now)
+            return requested

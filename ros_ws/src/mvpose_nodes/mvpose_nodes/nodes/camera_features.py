@@ -6,18 +6,26 @@ Subscribes image_raw/compressed and image_raw (rgb8/bgr8), and camera_info (to c
 publishes skin_ellipses, labelled_contour, the silhouette (mono8 0/255) as silhouette/compressed (PNG)
 and silhouette (sensor_msgs/Image; 2 MB at 1080p), and with publish_overlay features_overlay, each with
 the source image's header unchanged. The silhouettes are made only while something subscribes to them.
+While a skeleton_fitter asks for frames on frame_request (std_msgs/Header: the stamp of the image it
+wants) and follow_requests is on, the node keeps the newest images undecoded, announces each one's header
+on frame_available, and computes features only for the images asked for; the others are skipped
+(counted). Every camera then skips the same frames, so a graph slower than the cameras loses whole frame
+sets and no camera works on one that will not be fitted.
 Its state and CPU per stage (decode, features, conversion, publish) go to /diagnostics once a second. Bad input (undecodable or wrongly
 encoded images, sizes that disagree with camera_info, no person) is logged once per cause and
 answered with empty features carrying a status; the node keeps running.
 """
+import collections
+
 import numpy as np
 from mvpose_msgs.msg import LabelledContour, SkinEllipseArray
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 from sensor_msgs.msg import CameraInfo, CompressedImage, Image
+from std_msgs.msg import Header
 
 from mvpose_nodes.ros.conversions import (ImageError, colour_image, empty_feature_messages, feature_messages, mono_image,
-                                          png_mono, rgb_image)
+                                          png_mono, rgb_image, stamp_ns)
 from mvpose_nodes.ros.diagnostics import NodeDiagnostics, StageClock
 from mvpose_nodes.ros.helpers import LATCHED, ReportOnce, camera_of_namespace, run_node
 from mvpose_nodes.ros.params import (CAMERA_FEATURES, ParameterError, changed_values, declare_parameters,
@@ -27,6 +35,9 @@ from mvpose_nodes.vision.silhouette import BackgroundLearner
 from mvpose_nodes.vision.skin import SkinModel, SkinModelError
 
 STREAM_DEPTH = 5
+# Images kept for the fitter's requests: 0.4 s at 25 fps, far longer than a request takes to follow the
+# announcement of its image (a DDS round trip and the fitter's executor).
+HELD_IMAGES = 10
 
 
 class CameraFeaturesNode(ReportOnce, Node):
@@ -48,8 +59,12 @@ class CameraFeaturesNode(ReportOnce, Node):
             resolved = self.resolve_topic_name(topic)
             self.create_subscription(kind, topic, lambda message, t=resolved: self.on_image(message, t), STREAM_DEPTH)
         self.create_subscription(CameraInfo, 'camera_info', self.on_camera_info, LATCHED)
+        self.request_topic = self.resolve_topic_name('frame_request')
+        self.available_publisher = self.create_publisher(Header, 'frame_available', STREAM_DEPTH)
+        self.create_subscription(Header, 'frame_request', self.on_request, STREAM_DEPTH)
+        self.held = collections.OrderedDict()   # stamp [ns] -> (image message, its topic), oldest first
         self.clock = StageClock()   # CPU per stage: decode, features, conversion, publish
-        self.counts = {'images': 0, 'images with a person': 0, 'images rejected': 0}
+        self.counts = {'images': 0, 'images with a person': 0, 'images rejected': 0, 'images not requested': 0}
         self.last_problem = ''
         self.diagnostics = NodeDiagnostics(self, self.state, [self.clock])
         self.get_logger().info(f'camera {self.camera}: {self.values["silhouette_method"]} silhouettes, '
@@ -78,6 +93,37 @@ class CameraFeaturesNode(ReportOnce, Node):
 
     def on_image(self, message, topic):
         self.counts['images'] += 1
+        if not self.following_requests():
+            return self.compute(message, topic)
+        self.held[stamp_ns(message.header)] = (message, topic)
+        while len(self.held) > HELD_IMAGES:
+            self.held.popitem(last=False)
+            self.counts['images not requested'] += 1
+        self.available_publisher.publish(message.header)
+
+    def following_requests(self):
+        """Whether images wait for requests: follow_requests is on, something publishes frame_request and
+        has matched frame_available (an announcement that nobody hears would never be requested), and no
+        background is still to be learned (that needs every image)."""
+        learning = self.values['silhouette_method'] == 'background' and self.extractor.background is None
+        return (self.values['follow_requests'] and not learning and self.count_publishers(self.request_topic) > 0
+                and self.available_publisher.get_subscription_count() > 0)
+
+    def on_request(self, header):
+        """Features of the held image stamped as `header`; the older held images are skipped (the fitter
+        asks for the newest set it can fit, so it will not ask for them)."""
+        stamp = stamp_ns(header)
+        if stamp not in self.held:
+            return self.report_once('request miss', f'{self.request_topic}: no image stamped {stamp} ns is held '
+                                                    f'(the newest {HELD_IMAGES} are); not answered (logged once)')
+        while True:
+            held_stamp, (message, topic) = self.held.popitem(last=False)
+            if held_stamp == stamp:
+                return self.compute(message, topic)
+            self.counts['images not requested'] += 1
+
+    def compute(self, message, topic):
+        """Decode one image message and publish its features."""
         try:
             with self.clock('decode'):
                 rgb = colour_image(message)
@@ -142,6 +188,8 @@ class CameraFeaturesNode(ReportOnce, Node):
         if not counts['images']:
             return 'ok', 'no image yet', counts
         message = f"{counts['images']} images, {counts['images with a person']} with a person"
+        if counts['images not requested']:
+            message += f", {counts['images not requested']} not requested by the fitter (skipped)"
         if counts['images rejected']:
             return 'warn', f"{message}, {counts['images rejected']} rejected (last: {self.last_problem})", counts
         return 'ok', message, counts

@@ -12,17 +12,26 @@ RViz and Foxglove); the node's state and CPU per stage once a second on /diagnos
 (diagnostic_msgs/DiagnosticArray). A camera whose features stop is left out after camera_timeout
 (status DEGRADED) and rejoins when they come back. A frame set with fewer than two cameras seeing the
 person gets STATUS_LOST, repeating the last fitted pose.
+
+With request_frames (the default) the fitter also paces the cameras: it synchronises the stamps they
+announce on /cam<K>/frame_available (std_msgs/Header, one per image) and, each time nothing waits before
+its two stages, asks every camera for the newest announced set on /cam<K>/frame_request (std_msgs/Header,
+that camera's image stamp). Cameras that follow requests (camera_features' follow_requests) compute
+features only for those: frames the graph cannot keep up with are skipped whole, before any camera spends
+CPU on them, and counted as skipped.
 """
 import threading
+import time
 
 import cv2
 from mvpose_msgs.msg import LabelledContour, Skeleton, SkinEllipseArray
 from sensor_msgs.msg import JointState
+from std_msgs.msg import Header
 from visualization_msgs.msg import MarkerArray
 
 from mvpose_nodes.fitting.fitter import warm_up
-from mvpose_nodes.fitting.sync import PendingSets
-from mvpose_nodes.ros.conversions import joint_state, joints_from_skeleton, skeleton_markers
+from mvpose_nodes.fitting.sync import FrameRequests, PendingSets
+from mvpose_nodes.ros.conversions import joint_state, joints_from_skeleton, skeleton_markers, stamp_ns
 from mvpose_nodes.ros.diagnostics import NodeDiagnostics
 from mvpose_nodes.ros.frame_set_fitting import FrameSetFitter
 from mvpose_nodes.ros.helpers import LATCHED, run_node
@@ -51,6 +60,16 @@ class SkeletonFitterNode(MultiCameraNode):
         self.pending = PendingSets(self.values['pending_frame_sets'])
         self.prepared = PendingSets(self.values['pending_frame_sets'])
         self.counts = {'frame sets fitted': 0, 'frame sets skipped (stale)': 0, 'frame sets without a fit': 0}
+        self.requests = None
+        if self.values['request_frames']:
+            self.requests = FrameRequests(self.values['camera_timeout'])
+            self.announcements = self.synchronizer(['frame_available'])
+            self.request_publishers = {k: self.create_publisher(Header, f'/cam{k}/frame_request', 10)
+                                       for k in self.cameras}
+            for k in self.cameras:
+                self.create_subscription(Header, f'/cam{k}/frame_available',
+                                         lambda header, k=k: self.on_announcement(k, header), 10)
+            self.create_timer(0.1, self.request_next)   # gives up unanswered requests
         self.last_status = None
         self.workers = {name: threading.Thread(target=work, name=name, daemon=True)
                         for name, work in (('preparing', self.preparing_loop), ('fitting', self.fitting_loop))}
@@ -61,6 +80,24 @@ class SkeletonFitterNode(MultiCameraNode):
 
     def on_frame_set(self, frame_set):
         self.pending.put(frame_set)
+        if self.requests is not None:
+            self.requests.received(frame_set.stamp_ns)
+
+    def on_announcement(self, camera, header):
+        with self.clock('sync'):
+            for announced in self.announcements.add((camera, 'frame_available'), stamp_ns(header), header):
+                self.requests.announce(announced)
+        self.request_next()
+
+    def request_next(self):
+        """Ask the cameras for the newest announced frame set if nothing waits before the fitter's stages
+        (called from the executor and from both worker threads; rcl_publish is thread-safe)."""
+        if self.requests is None:
+            return
+        requested = self.requests.next_request(time.monotonic(), ready=not len(self.pending) and not len(self.prepared))
+        if requested is not None:
+            for (k, _), header in requested.messages.items():
+                self.request_publishers[k].publish(header)
 
     def preparing_loop(self):
         """The 'preparing' thread: frame sets -> fitting's PreparedSets."""
@@ -68,6 +105,7 @@ class SkeletonFitterNode(MultiCameraNode):
             frame_set = self.pending.take(timeout=0.5)
             if frame_set is None:
                 continue
+            self.request_next()
             try:
                 features = {number: (self.camera(number), frame_set.messages[(number, 'skin_ellipses')],
                                      frame_set.messages[(number, 'labelled_contour')])
@@ -83,7 +121,8 @@ class SkeletonFitterNode(MultiCameraNode):
             prepared = self.prepared.take(timeout=0.5)
             if prepared is None:
                 continue
-            skips = self.pending.skipped + self.prepared.skipped
+            self.request_next()
+            skips = self.pending.skipped + self.prepared.skipped + (self.requests.skipped if self.requests else 0)
             skipped, reported_skips = skips - reported_skips, skips
             try:
                 self.fit_and_publish(prepared, skipped)
@@ -114,10 +153,13 @@ class SkeletonFitterNode(MultiCameraNode):
     def state(self):
         """The node's diagnostics: level, message and counters (ros/diagnostics.py)."""
         level = 'ok' if self.last_status in (Skeleton.STATUS_OK, Skeleton.STATUS_INITIALISING) else 'warn'
+        counts = dict(self.counts)
+        if self.requests is not None:
+            counts['frame requests unanswered'] = self.requests.unanswered
         message = (f"{self.counts['frame sets fitted']} frame sets fitted, "
                    f"{self.counts['frame sets skipped (stale)']} skipped (stale), last status "
                    f"{STATUS_NAMES.get(self.last_status, 'none yet')}")
-        return level, message, self.counts
+        return level, message, counts
 
     def destroy_node(self):
         self.pending.close()

@@ -94,10 +94,6 @@ class CameraBagWriter:
         self.bag.close()
 
 
-def truth(self):
-        return self.skeletons.get(GROUND_TRUTH_TOPIC)
-
-
 @dataclass
 class FrameSet:
     """All cameras of one frame of a bag: RGB images, ground-truth label masks (synthetic bags),

@@ -31,12 +31,7 @@ class MultiCameraNode(ReportOnce, Node):
         self.values = declare_parameters(self, parameters)
         self.clock = StageClock()   # CPU per stage (ros/diagnostics.py): 'sync' here, the subclass's own
         self.cameras = cameras = self.values['cameras']
-        channels = [(k, topic) for k in cameras for topic in inputs]
-        self.sync = ApproximateTimeSynchronizer(
-            channels, queue_size=self.values['queue_size'],
-            max_interval_ns=int(self.values['max_interval'] * 1e9),
-            groups={channel: channel[0] for channel in channels},
-            timeout_ns=int(self.values['camera_timeout'] * 1e9))
+        self.sync = self.synchronizer(inputs)
         self.calibration = {k: {} for k in cameras}
         self.cameras_known = {}   # camera number -> Camera, from its latest calibration messages
         # Frame sets that come before a camera's calibration wait for it (calibration_wait), in order.
@@ -48,6 +43,15 @@ class MultiCameraNode(ReportOnce, Node):
                 self.create_subscription(kind, f'/cam{k}/{topic}', self.receiver(k, topic), 10)
             self.create_subscription(CameraInfo, f'/cam{k}/camera_info', self.calibration_receiver(k, 'info'), LATCHED)
             self.create_subscription(PoseStamped, f'/cam{k}/camera_pose', self.calibration_receiver(k, 'pose'), LATCHED)
+
+    def synchronizer(self, topics):
+        """An ApproximateTimeSynchronizer of the configured cameras' `topics` (channels (camera, topic), a
+        camera's topics one group) with the node's queue_size, max_interval and camera_timeout."""
+        channels = [(k, topic) for k in self.cameras for topic in topics]
+        return ApproximateTimeSynchronizer(channels, queue_size=self.values['queue_size'],
+                                           max_interval_ns=int(self.values['max_interval'] * 1e9),
+                                           groups={channel: channel[0] for channel in channels},
+                                           timeout_ns=int(self.values['camera_timeout'] * 1e9))
 
     def calibration_receiver(self, camera, kind):
         """Keep the camera's messages; once both are there, its Camera (converted once, not per frame)."""

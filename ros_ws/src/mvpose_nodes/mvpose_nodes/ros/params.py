@@ -155,6 +155,10 @@ CAMERA_FEATURES = (
               "give elbow and hand), 'long' (hand only) or 'auto' (decided per region from its elongation)",
               choices=('auto', 'short', 'long')),
     Parameter('publish_overlay', False, 'also publish features_overlay: the image with every feature drawn on'),
+    Parameter('follow_requests', True, 'while a skeleton_fitter asks for frames on frame_request, announce each '
+              "image's stamp on frame_available and compute features only for the images it asks for, as every "
+              'camera does: a graph slower than the cameras then skips whole frame sets before any features are '
+              'computed; false: features of every image'),
 )
 FEATURE_SETTING_NAMES = {f.name for f in fields(FeatureSettings)}
 
@@ -204,7 +208,11 @@ SKELETON_FITTER = multi_camera_parameters(
     Parameter('pending_frame_sets', 1, 'frame sets that may wait while the fitter is busy, before each of its two '
               'stages (distance maps, fit); when one more comes, the oldest waiting is skipped, so the fit keeps to the newest (real time). 0: none is skipped, '
               'every frame set is fitted in order (offline replays; the wait can grow)', range=(0, 1000),
-              read_only=True),) + tuple(
+              read_only=True),
+    Parameter('request_frames', True, "ask the cameras for each frame set it will fit (/cam<K>/frame_request, the "
+              "newest set announced on /cam<K>/frame_available once nothing waits before its stages), so that the "
+              "cameras skip the frames it would skip (their follow_requests); a request unanswered for "
+              "camera_timeout wall seconds is given up", read_only=True),) + tuple(
     Parameter(f.name, f.default, f.metadata['description'], range=f.metadata['range'], read_only=True)
     for f in SETTING_FIELDS)
 MARKER_SKELETON = multi_camera_parameters('marker tracks are fused in 3D (each needs a marker_tracker in /cam<K>)')

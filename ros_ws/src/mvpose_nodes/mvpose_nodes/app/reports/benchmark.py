@@ -128,6 +128,7 @@ class BenchResult:
     skeletons: dict = field(default_factory=dict)   # stamp -> (t received, fit_time)
     unfitted: int = 0                               # frame sets the fitter had too few views for
     dropped: int = 0                                # frame sets without any answer within STALL_TIMEOUT
+    overtaken: int = 0                              # frame sets unanswered when a later one was fitted (skipped)
     skipped: int = 0                                # frame sets the fitter skipped as stale (its /diagnostics)
     errors_mm: dict = field(default_factory=dict)   # stamp -> mean joint error [mm] of a fitted frame set
     decode_ms: list = field(default_factory=list)
@@ -146,14 +147,15 @@ def format_table(result):
     rate = throughput(result.sent, result.skeletons)
     floor_rate = decode_only_rate(result.decode_ms, len(result.cameras))
     missing = result.frame_sets - fitted
+    unsent = missing - result.unfitted - result.overtaken - result.dropped
     if not missing:
         outcome = 'none dropped'
     else:
         outcome = ', '.join(part for part in (
             f'{result.unfitted} with too few views' if result.unfitted else '',
+            f'{result.overtaken} passed over (a later one was fitted)' if result.overtaken else '',
             f'{result.dropped} dropped (no answer in {STALL_TIMEOUT:.0f} s)' if result.dropped else '',
-            f'{missing - result.unfitted - result.dropped} not sent' if missing - result.unfitted - result.dropped
-            else '') if part)
+            f'{unsent} not sent' if unsent else '') if part)
     ratio = rate / floor_rate if floor_rate and np.isfinite(floor_rate) else float('nan')
     lines = [
         f'bench: {result.bag}  ({result.frame_sets} frame sets, cameras {" ".join(map(str, result.cameras))}, '
