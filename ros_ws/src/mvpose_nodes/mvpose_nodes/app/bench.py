@@ -19,8 +19,8 @@ Wall times in this process give the latencies:
   end to end  images published -> /mvpose/skeleton of that stamp received
 
 A frame set still unanswered when a later one is fitted was passed over (the fitter fits in stamp order
-and skips what it cannot keep up with); one without any answer for 60 s (closed loop) or 10 s (open
-loop) counts as dropped.
+and skips what it cannot keep up with); one without any answer for STALL_TIMEOUT (closed loop) or
+DRAIN_TIMEOUT (open loop) counts as dropped.
 
 end-to-end throughput = frame sets fitted / (last skeleton received - first images published);
 decode-only throughput = 1 / (cameras x median decode time of one image): frame sets per second that one

@@ -7,8 +7,8 @@ objective 50–150 times per stage; in numpy most of each evaluation's ~300 µs 
 overhead of some hundred small array operations, compiled it is a few µs.
 
 The frame's evidence is packed once per frame (`pack_frame`: cameras, silhouette maps and boundary
-maps, flattened into one buffer each) and a stage's once per search (`pack_stage`: its outline points,
-keypoint targets, bones, priors), so an evaluation passes only the trial values. Compiled functions are
+maps, flattened into one buffer each) and a stage's once per search (`StageSearch.stage_pack`: its
+outline points, keypoint targets, bones, priors), so an evaluation passes only the trial values. Compiled functions are
 cached on disk (numba's cache=True; ./mvpose sets NUMBA_CACHE_DIR to .venv/numba-cache), so only the
 first run on a machine compiles (about 20 s; fitter.warm_up does it at a node's start, not in its first
 fit). They release the GIL (nogil), so the node's executor thread takes messages while a search runs.

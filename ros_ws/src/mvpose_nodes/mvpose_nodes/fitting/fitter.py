@@ -149,8 +149,9 @@ class SkeletonFitter:
                 indices = stage_indices(stage)
                 alternative = parameters.copy()
                 alternative[indices] = candidate[indices]
-                if (self.stages.compiled_cost(stage, alternative, oriented, assigned, frame)[0]
-                        < self.stages.compiled_cost(stage, parameters, oriented, assigned, frame)[0]):
+                pack = self.stages.stage_pack(stage, parameters, oriented, assigned, priors=False)
+                if (self.stages.compiled_cost(stage, alternative, oriented, assigned, frame, pack)[0]
+                        < self.stages.compiled_cost(stage, parameters, oriented, assigned, frame, pack)[0]):
                     parameters = alternative
             parameters, result = self.stages.search(stage, parameters, oriented, assigned, frame)
             results.append(result)

@@ -70,6 +70,7 @@ CAPSULE_ENDS = np.array([(JOINT_INDEX[bone.parent_joint], JOINT_INDEX[bone.joint
 CAPSULE_RADIUS = np.array([CAPSULE_RADII[bone.name.replace('left_', '').replace('right_', '')] for bone in BONES])
 CAPSULE_TERMINAL = np.array([bone.name.endswith(TERMINAL_BONES) for bone in BONES])
 FRACTIONS, SAMPLES = fractions_arrays()
+WITHOUT_PRIORS = np.array([1.0] * 8 + [0.0, 0.0])   # StagePack.weights' factors: smoothness and limits off
 STAGE_CAPSULE_INDEX = {stage: np.array([BONE_INDEX[name] for name in names]) for stage, names in STAGE_CAPSULES.items()}
 
 
@@ -134,13 +135,16 @@ class StageSearch:
             np.zeros(len(views), np.bool_), *pack, *frame)
         fitted = parameters.copy()
         fitted[indices] = found
-        final, used = self.compiled_cost(stage, fitted, views, assigned, frame)
+        final, used = self.compiled_cost(stage, fitted, views, assigned, frame, pack)
         return fitted, StageResult(stage, final, int(evaluations), sorted(views[i].camera.number for i in used), True)
 
-    def compiled_cost(self, stage, parameters, views, assigned, frame):
-        """stage_cost (without the priors) by the compiled objective: (cost, indices of the views that
-        contributed)."""
-        pack = self.stage_pack(stage, parameters, views, assigned, priors=False)
+    def compiled_cost(self, stage, parameters, views, assigned, frame, pack=None):
+        """stage_cost (without the priors) by the compiled objective at `parameters` (29,): (cost, indices of
+        the views that contributed). pack: a stage_pack of this stage, views and assignment to reuse (its
+        start and priors do not matter here), or None to make one."""
+        if pack is None:
+            pack = self.stage_pack(stage, parameters, views, assigned, priors=False)
+        pack = pack._replace(base=np.asarray(parameters, float).copy(), weights=pack.weights * WITHOUT_PRIORS)
         used = np.zeros(len(views), np.bool_)
         vertices = np.tile(parameters[pack.indices], (len(pack.indices) + 1, 1))   # a search of one evaluation
         _, cost, _ = search(vertices, 0.0, 0.0, 1, self.bone_lengths, FRACTIONS, SAMPLES, used, *pack, *frame)
