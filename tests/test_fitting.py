@@ -6,6 +6,7 @@ import pytest
 
 from mvpose_nodes.body.model import JOINT_NAMES
 from mvpose_nodes.body.camera import studio_rig
+from mvpose_nodes.body.kinematics import lengths_of
 from mvpose_nodes.fitting.fitter import SkeletonFitter, View
 from mvpose_nodes.fitting.stage_search import KEYPOINT_JOINT
 
@@ -154,3 +155,24 @@ def test_the_face_the_views_see_decides_front_from_back_at_the_start(cmu_walk):
         return 1000 * np.linalg.norm(fit.joints - truth, axis=1).mean()
     assert error(True) < 60, error(True)
     assert error(False) > 150, error(False)   # the check can fail: the labels alone keep the wrong start
+
+
+def test_the_subjects_known_bone_lengths_are_kept_and_fit_closer(cmu_walk):
+    """SkeletonFitter(lengths=...) fits with the bone lengths it is given (as `eval suite --true-lengths`
+    does) instead of measuring the person, and with the subject's true ones the exact keypoints are
+    followed more closely than with the measured template."""
+    motion = cmu_walk.placed()
+    cameras = studio_rig(cameras=[3, 5, 7])
+    true_lengths = lengths_of(motion.joints)
+    given, measured = SkeletonFitter(lengths=true_lengths), SkeletonFitter()
+    errors = {id(given): [], id(measured): []}
+    for frame in range(0, 12):
+        truth = motion.joints[frame]
+        for fitter in (given, measured):
+            fit = fitter.fit(frame / 25.0, exact_views(cameras, truth))
+            errors[id(fitter)].append(np.linalg.norm(fit.joints - truth, axis=1).mean())
+        assert lengths_of(fit.joints[None]) != pytest.approx(true_lengths, rel=1e-3)   # measured's differ
+    assert given.lengths == true_lengths
+    fit = given.fit(12 / 25.0, exact_views(cameras, motion.joints[12]))
+    assert lengths_of(fit.joints[None]) == pytest.approx(true_lengths, abs=1e-9)
+    assert np.mean(errors[id(given)]) < np.mean(errors[id(measured)]), errors

@@ -6,7 +6,7 @@ import pytest
 from mvpose_nodes.body.model import PARAMETER_NAMES
 from mvpose_nodes.body.geometry import normalize, quaternion_from_matrix, rotation_between
 from mvpose_nodes.body.kinematics import (BONES, JOINT_INDEX, PARAMETER_INDEX, bone_lengths, euler_from_quaternion,
-                                     euler_matrix, forward_kinematics, inverse_kinematics)
+                                     euler_matrix, forward_kinematics, inverse_kinematics, lengths_of)
 
 pytestmark = pytest.mark.pure
 
@@ -112,3 +112,14 @@ def test_parallel_and_antiparallel_bones():
     raised[JOINT_INDEX['left_wrist']] = shoulder + [0, 0, LENGTHS['upper_arm'] + LENGTHS['forearm']]
     again, _ = forward_kinematics(inverse_kinematics(raised), LENGTHS)
     assert np.allclose(again, raised, atol=1e-9)
+
+
+def test_lengths_of_random_poses_are_the_bone_lengths_left_and_right_averaged():
+    rng = np.random.default_rng(3)
+    lengths = {key: value * rng.uniform(0.9, 1.1) for key, value in LENGTHS.items()}
+    joints = np.array([forward_kinematics(random_twist_free_pose(rng), lengths)[0] for _ in range(5)])
+    joints[2] = np.nan   # a frame without a skeleton does not count
+    assert lengths_of(joints) == pytest.approx(lengths, abs=1e-9)
+    longer = joints.copy()
+    longer[:, JOINT_INDEX['left_wrist']] += 0.1 * (longer[:, JOINT_INDEX['left_wrist']] - longer[:, JOINT_INDEX['left_elbow']])
+    assert lengths_of(longer)['forearm'] == pytest.approx(lengths['forearm'] * 1.05, abs=1e-9)

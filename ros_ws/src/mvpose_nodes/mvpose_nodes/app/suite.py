@@ -40,6 +40,9 @@ def build_parser(prog):
                         help='run only these cases of the draw (as numbered in the table), e.g. to look at one again')
     parser.add_argument('--resolution', default='1920x1080', help='WIDTHxHEIGHT (default 1920x1080)')
     parser.add_argument('-j', '--jobs', type=int, default=2, help='cases rendered and fitted at once (default 2)')
+    parser.add_argument('--true-lengths', action='store_true',
+                        help="diagnosis: fit with the person's true bone lengths (from the motion) instead of "
+                             'measuring them, to see how much of the error the measurement of the person costs')
     parser.add_argument('-o', '--output', type=Path, default=Path('output/suite'),
                         help='folder for the worst case\'s pictures (default output/suite)')
     return parser
@@ -90,12 +93,13 @@ def main(argv=None, prog='eval suite'):
             if not all(0 <= index < len(cases) for index in args.only):
                 raise UserError(f'--only takes case numbers 0..{len(cases) - 1} of the --cases {len(cases)} drawn')
             cases = [cases[index] for index in args.only]
-        print(f'[suite] {len(cases)} cases × {args.frames} frame sets, seed {args.seed}, {args.jobs} at once',
+        print(f'[suite] {len(cases)} cases × {args.frames} frame sets, seed {args.seed}, {args.jobs} at once'
+              + (", the fitter given the true bone lengths (--true-lengths)" if args.true_lengths else ''),
               file=sys.stderr, flush=True)
         progress = Progress(len(cases), 'suite', unit='cases')
         results = []
         with ProcessPoolExecutor(max_workers=args.jobs) as pool:
-            for result in pool.map(run_case, cases):
+            for result in pool.map(run_case, cases, [args.true_lengths] * len(cases)):
                 results.append(result)
                 progress.update()
         progress.close()
@@ -170,9 +174,11 @@ def render_camera(case, view, motion, index):
     return cv2.cvtColor(cv2.imdecode(data, cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB)
 
 
-def run_case(case):
-    """Render, extract and fit every frame set of a case; its CaseResult."""
+def run_case(case, true_lengths=False):
+    """Render, extract and fit every frame set of a case; its CaseResult. true_lengths: the fitter is given
+    the motion's bone lengths instead of measuring the person."""
     from std_msgs.msg import Header
+    from mvpose_nodes.body.kinematics import lengths_of
     from mvpose_nodes.fitting.settings import FitterSettings
     from mvpose_nodes.ros.camera_bag import frame_stamp_ns
     from mvpose_nodes.ros.conversions import feature_messages, joints_from_skeleton, optical_frame, set_stamp
@@ -187,7 +193,8 @@ def run_case(case):
     views = [scene.prepare_camera(cameras[k], texture_seed=k) for k in case.cameras]
     skin = SkinModel.load(default_skin_model_path())
     extractors = {k: FeatureExtractor(FeatureSettings(), skin) for k in case.cameras}
-    fitting = FrameSetFitter(FitterSettings(), case.cameras)
+    fitting = FrameSetFitter(FitterSettings(), case.cameras,
+                             lengths=lengths_of(motion.joints) if true_lengths else None)
     count = len(motion.joints)
     joints = np.full((count, 15, 3), np.nan)
     statuses, seconds = [None] * count, []

@@ -70,6 +70,17 @@ def bone_lengths(height):
     return {key: fraction * height for key, fraction in LENGTH_FRACTIONS.items()}
 
 
+def lengths_of(joints):
+    """{length key: [m]} of a person from joints (F, 15, 3) [m] (NaN frames ignored): per bone its median
+    length over the frames, averaged over the bones sharing a key (left and right)."""
+    joints = np.asarray(joints, float).reshape(-1, len(JOINT_NAMES), 3)
+    found = {}
+    for bone in BONES:
+        lengths = np.linalg.norm(joints[:, JOINT_INDEX[bone.joint]] - joints[:, JOINT_INDEX[bone.parent_joint]], axis=1)
+        found.setdefault(bone.length, []).append(np.nanmedian(lengths))
+    return {key: float(np.mean(found[key])) for key in LENGTH_FRACTIONS}
+
+
 def euler_matrix(rx, ry, rz):
     """R = Rz(rz)·Ry(ry)·Rx(rx) (paper 004 Eq. 2)."""
     cx, sx, cy, sy, cz, sz = np.cos(rx), np.sin(rx), np.cos(ry), np.sin(ry), np.cos(rz), np.sin(rz)

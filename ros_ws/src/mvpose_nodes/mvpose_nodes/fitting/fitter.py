@@ -60,15 +60,18 @@ class Fit:
 
 class SkeletonFitter:
     """Frame-by-frame fitting: `fit(stamp_s, views) -> Fit`, keeping the pose and the person's size.
-    settings: FitterSettings (default: the measured defaults)."""
+    settings: FitterSettings (default: the measured defaults); lengths: the person's bone lengths
+    {length key (kinematics.LENGTH_FRACTIONS): [m]} when known beforehand, else None: measured at the
+    first initialisation (initialisation.person_lengths)."""
 
-    def __init__(self, settings=None):
+    def __init__(self, settings=None, lengths=None):
         self.settings = settings or FitterSettings()
         self.parameters = None
-        self.lengths = None
+        self.lengths = None if lengths is None else dict(lengths)
         self.last_stamp = None
         self.tracks = LimbTracks(self.settings)
-        self.stages = None   # StageSearch, once the person's bone lengths are known
+        # The stage searches, once the person's bone lengths are known.
+        self.stages = None if lengths is None else StageSearch(self.settings, self.lengths)
         self.turns = 0   # times the torso was turned to face the direction of travel (facing_travel)
         self.facing = FacingWatch(self.settings)
         self.flips = 0   # times the fit was turned round because the feet pointed backwards

@@ -42,11 +42,11 @@ class PreparedSet:
 
 class FrameSetFitter:
     """The skeleton fitter behind the node: `settings` (fitting.settings.FitterSettings), the configured
-    camera numbers, and the StageClock that counts the CPU of its stages ('conversion', 'distance maps',
-    'fit')."""
+    camera numbers, the StageClock that counts the CPU of its stages ('conversion', 'distance maps',
+    'fit'), and the person's bone lengths if known (SkeletonFitter's `lengths`)."""
 
-    def __init__(self, settings, cameras, clock=None):
-        self.fitter = SkeletonFitter(settings)
+    def __init__(self, settings, cameras, clock=None, lengths=None):
+        self.fitter = SkeletonFitter(settings, lengths)
         self.cameras = list(cameras)
         self.clock = clock or StageClock()
 
