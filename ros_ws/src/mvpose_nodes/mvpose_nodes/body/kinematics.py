@@ -70,14 +70,21 @@ def bone_lengths(height):
     return {key: fraction * height for key, fraction in LENGTH_FRACTIONS.items()}
 
 
-def lengths_of(joints):
-    """{length key: [m]} of a person from joints (F, 15, 3) [m] (NaN frames ignored): per bone its median
-    length over the frames, averaged over the bones sharing a key (left and right)."""
+def bone_lengths_of(joints):
+    """{bone name (BONES): [m]} each bone's median length over the frames of joints (F, 15, 3) [m] (frames
+    without a skeleton, NaN, ignored)."""
     joints = np.asarray(joints, float).reshape(-1, len(JOINT_NAMES), 3)
-    found = {}
+    return {bone.name: float(np.nanmedian(np.linalg.norm(joints[:, JOINT_INDEX[bone.joint]]
+                                                         - joints[:, JOINT_INDEX[bone.parent_joint]], axis=-1)))
+            for bone in BONES}
+
+
+def lengths_of(joints):
+    """{length key (LENGTH_FRACTIONS): [m]} of a person from joints (F, 15, 3) [m]: bone_lengths_of, the
+    bones that share a key (left and right) averaged."""
+    per_bone, found = bone_lengths_of(joints), {}
     for bone in BONES:
-        lengths = np.linalg.norm(joints[:, JOINT_INDEX[bone.joint]] - joints[:, JOINT_INDEX[bone.parent_joint]], axis=1)
-        found.setdefault(bone.length, []).append(np.nanmedian(lengths))
+        found.setdefault(bone.length, []).append(per_bone[bone.name])
     return {key: float(np.mean(found[key])) for key in LENGTH_FRACTIONS}
 
 

@@ -197,12 +197,6 @@ def frame_time(stamps_ns):
     return float(np.median(steps)) / 1e9 if len(steps) else DEFAULT_FRAME_TIME
 
 
-def recorded_bone_lengths(joints):
-    """{bone name: [m]} median over the frames of each bone's length in joints (F, 15, 3) [m]."""
-    return {bone.name: float(np.median(np.linalg.norm(joints[:, JOINT_INDEX[bone.joint]] - joints[:, JOINT_INDEX[bone.parent_joint]],
-                                                      axis=-1))) for bone in kinematics.BONES}
-
-
 def bone_rotations(joints, parameters=None):
     """{bone name: 3×3 world rotation} of every bone of kinematics.BONES in one frame (module docstring):
     the model's frame of the bone from `parameters` (29,) [m, rad] (inverse_kinematics of the joints when
@@ -294,7 +288,7 @@ def bvh_hierarchy(lengths):
 
 def write_bvh(motion, stream):
     """The motion as BVH (module docstring) to a text stream."""
-    lengths = recorded_bone_lengths(motion.joints)
+    lengths = kinematics.bone_lengths_of(motion.joints)
     rows = bvh_motion(motion, lengths)
     lines = bvh_hierarchy(lengths)
     lines += ['MOTION', f'Frames: {motion.frame_count}', f'Frame Time: {frame_time(motion.stamps_ns):.9f}']
