@@ -74,6 +74,34 @@ def test_too_few_views_is_a_clear_error(cmu_walk):
         SkeletonFitter().fit(0.0, exact_views(studio_rig(cameras=[3]), motion.joints[0]))
 
 
+def test_a_frame_set_too_few_views_initialise_from_gets_a_standing_best_guess(cmu_walk):
+    """Issue 13 (every frame set answered): one camera's root keypoint puts a standing template on its ray,
+    at the depth where the outline's lowest point meets the floor (at the template's pelvis height without an
+    outline), facing that camera; two cameras' triangulate it; none give None."""
+    from common import rendered_views
+    from mvpose_nodes.body.kinematics import bone_lengths, forward_kinematics
+    from mvpose_nodes.fitting.initialisation import TEMPLATE_HEIGHT, guessed_parameters
+    from mvpose_nodes.fitting.limb_sides import torso_forward
+    from mvpose_nodes.fitting.settings import FitterSettings
+    rig = studio_rig(cameras=[3, 5])
+    [(truth, views)] = rendered_views(cmu_walk, rig, [len(cmu_walk.joints) // 2])
+    pelvis = truth[JOINT_NAMES.index('pelvis')]
+    lengths, ankle_height = bone_lengths(TEMPLATE_HEIGHT), FitterSettings().ankle_height
+    views = [View(view.camera, None, {'root': view.keypoints['root']}, outline=view.outline) for view in views]
+    without_outline = View(rig[0], None, views[0].keypoints)
+    # One view's guess is as good as a standing template can be: in this frame the pelvis is 11 cm above the
+    # template's, and the lowest outline point is a toe, up to 30 cm from under the pelvis mid-stride.
+    for seen, within in (([without_outline], 0.6), (views[:1], 0.4), (views[1:], 0.4), (views, 0.05)):
+        joints, _ = forward_kinematics(guessed_parameters(seen, lengths, ankle_height), lengths)
+        guessed = joints[JOINT_NAMES.index('pelvis')]
+        assert np.linalg.norm(guessed[:2] - pelvis[:2]) < within, (len(seen), guessed, pelvis)
+        ankles = joints[[JOINT_NAMES.index('left_ankle'), JOINT_NAMES.index('right_ankle')], 2]
+        np.testing.assert_allclose(ankles, ankle_height * TEMPLATE_HEIGHT, atol=1e-9)   # standing on the floor
+        towards = seen[0].camera.center - guessed
+        assert np.dot(torso_forward(joints), towards / np.linalg.norm(towards)) > 0.9 * np.hypot(*towards[:2]) / np.linalg.norm(towards)
+    assert guessed_parameters([View(rig[0], None, {})], lengths, ankle_height) is None
+
+
 def walk_found(motion, frame, rng, swap):
     """'Triangulated' joints of a walk frame: the truth with 2 cm noise, pairs given the wrong way round
     where `swap` says (as triangulation leaves them: it does not know the person's sides)."""

@@ -16,9 +16,11 @@ pytestmark = pytest.mark.graph
 @pytest.mark.timeout(150)
 def test_bench_runs_every_frame_set_through_the_graph(synth_bag):
     bag = synth_bag('--cameras', 3, 5, 7, '--frames', '70-73', '--resolution', '960x540')
-    result = run_mvpose('bench', bag, '--window', 2, timeout=90)
+    # One frame set in flight: with two, a fitter slower than the cameras (a loaded machine) rightly asks for
+    # the newer of two announced sets and passes the older over (frame requests), and not every set is fitted.
+    result = run_mvpose('bench', bag, '--window', 1, timeout=90)
     table = result.stdout
-    assert '(4 frame sets, cameras 3 5 7, 960×540, window 2)' in table
+    assert '(4 frame sets, cameras 3 5 7, 960×540, window 1)' in table
     assert '4 of 4 fitted, none dropped' in table
     rate = float(re.search(r'end-to-end\s+([\d.]+) frame sets/s', table).group(1))
     assert rate > 0
@@ -46,28 +48,34 @@ def test_demo_runs_the_graph_on_a_bag_and_writes_its_results(tmp_path, synth_bag
     assert len(list(output.glob('contact_sheet_frame7?.png'))) == 1
 
 
+@pytest.mark.timeout(240)
 def test_skeleton_fitter_node_in_the_graph(synth_bag, background, ros_context):
-    # Five frames: the first may reach the fitter before the calibration does (other topics), and is then skipped.
+    """Every frame set of the bag gets a skeleton (the first ones held until the calibration comes, the last
+    one flushed when the input stops), and the same bag played again gives the same skeletons (issue 13)."""
     bag = synth_bag('--cameras', 3, 5, '--frames', '70-74', '--resolution', '960x540')
     for k in (3, 5):
         background('run', 'camera_features', '--ros-args', '-r', f'__ns:=/cam{k}')
     fitter = background('run', 'skeleton_fitter', '--ros-args', '-p', 'cameras:=[3, 5]')
-    echo = background('topic', 'echo', '/mvpose/skeleton', '--count', 3, '--timeout', 120)
+    echo = background('topic', 'echo', '/mvpose/skeleton', '--count', 10, '--timeout', 200)
     wait_for_graph([f'/cam{k}/{name}' for k in (3, 5) for name in ('skin_ellipses', 'labelled_contour')]
                    + ['/mvpose/skeleton'])
-    run_mvpose('bag', 'play', bag, '--topics', '/cam3/image_raw/compressed', '/cam5/image_raw/compressed',
-               '/cam3/camera_info', '/cam5/camera_info', '/cam3/camera_pose', '/cam5/camera_pose',
-               '--wait-for-subscribers', '--delay', 1.0, '--rate', 0.2, timeout=180)
-    code, out, err = echo.finish(timeout=150)
+    for _ in range(2):
+        run_mvpose('bag', 'play', bag, '--topics', '/cam3/image_raw/compressed', '/cam5/image_raw/compressed',
+                   '/cam3/camera_info', '/cam5/camera_info', '/cam3/camera_pose', '/cam5/camera_pose',
+                   '--wait-for-subscribers', '--delay', 1.0, '--rate', 0.2, timeout=180)
+    code, out, err = echo.finish(timeout=200)
     assert code == 0, err
     skeletons = [d for d in yaml.safe_load_all(out) if d]
-    assert len(skeletons) == 3
+    assert len(skeletons) == 10
     stamps = [s['header']['stamp']['nanosec'] for s in skeletons]
-    assert stamps == sorted(stamps) and set(stamps) <= {800_000_000 + 40_000_000 * i for i in range(5)}
+    assert stamps == [800_000_000 + 40_000_000 * i for i in range(5)] * 2
     for skeleton in skeletons:
         assert skeleton['joint_names'] == list(JOINT_NAMES) and len(skeleton['parameters']) == 29
         assert [stage['name'] for stage in skeleton['stages']][0] == 'torso'
     assert skeletons[0]['status'] == 1 and skeletons[1]['status'] == 0   # INITIALISING, then OK
+    for first, again in zip(skeletons[:5], skeletons[5:]):
+        assert again['parameters'] == first['parameters'] and again['joints'] == first['joints']
+        assert again['status'] == first['status']
     fitter.interrupt()
 
 

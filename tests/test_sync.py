@@ -155,6 +155,62 @@ def test_silent_camera_gives_degraded_sets_then_rejoins():
     assert max(fed_ns - synced.stamp_ns for synced, fed_ns in out) <= timeout_ns + DELAY_NS + 2 * PERIOD_NS
 
 
+@pytest.mark.parametrize('reorder_window_ns, max_delay_ns', [(0, 30 * MS), (DELAY_NS, DELAY_NS)],
+                         ids=['channels-in-order', 'channels-reordered'])
+def test_flush_at_the_end_of_the_input_gives_the_last_frames(reorder_window_ns, max_delay_ns):
+    """Issue 13 (none lost at the end of a bag): the frames the input ends with wait for a message that never
+    comes; flush() gives them, each once, without breaking the guarantees, and the stream then goes on."""
+    rng = np.random.default_rng(5)
+    frames, pause = 60, 40
+    messages = camera_messages(rng, frames)
+    # The last frame without cam7: its set comes out degraded rather than not at all.
+    messages = [m for m in messages if m[2][0][0] != 'cam7' or m[2][1] != frames - 1]
+    sync = ApproximateTimeSynchronizer(CHANNELS, queue_size=10, max_interval_ns=MAX_INTERVAL_NS, groups=GROUPS,
+                                       reorder_window_ns=reorder_window_ns)
+    before = [s for s, _ in feed(sync, arrival_order(rng, [m for m in messages if m[2][1] < pause], max_delay_ns))]
+    assert {frame_of(s) for s in before} < set(range(pause)), 'the input ends with frames still waiting'
+    flushed = sync.flush()
+    after = [s for s, _ in feed(sync, arrival_order(rng, [m for m in messages if m[2][1] >= pause], max_delay_ns))]
+    flushed_last = sync.flush()
+    sets = before + flushed + after + flushed_last
+
+    assert_ros_guarantees(sets, MAX_INTERVAL_NS)
+    assert [frame_of(s) for s in sets] == list(range(frames))
+    assert all(set(s.messages) == set(CHANNELS) for s in sets[:-1])
+    assert sets[-1].missing_groups == {'cam7'} and {c for c, _ in sets[-1].messages} == {'cam3', 'cam5'}
+    assert sync.flush() == [], 'nothing twice'
+
+
+def test_flush_waits_for_a_camera_that_has_sent_part_of_its_messages():
+    sync = ApproximateTimeSynchronizer(CHANNELS, groups=GROUPS)
+    for channel in CHANNELS[:-1]:   # all but cam7's contour
+        assert sync.add(channel, 0, (channel, 0)) == []
+    assert sync.flush() == [], 'cam7 is not silent: its contour is on the way'
+    [synced] = sync.add(CHANNELS[-1], 0, (CHANNELS[-1], 0))
+    assert set(synced.messages) == set(CHANNELS)
+
+
+def test_the_same_stream_played_again_gives_the_same_sets_again():
+    """Issue 13 (the same bag played twice gives the same skeletons): a channel whose stamps go back by more
+    than restart_ns (0, as the nodes use it) starts the synchroniser afresh, after flushing the first play's last sets; without it the
+    second play's messages are all dropped as crossing the first play's sets."""
+    rng = np.random.default_rng(6)
+    messages = camera_messages(rng, 40, drop=0.05)
+
+    def played(times, restart_ns):
+        sync = ApproximateTimeSynchronizer(CHANNELS, queue_size=10, max_interval_ns=MAX_INTERVAL_NS, groups=GROUPS,
+                                           restart_ns=restart_ns)
+        sets = [synced for _ in range(times) for synced, _ in feed(sync, messages)]
+        return [(synced.stamps_ns, synced.messages) for synced in sets + sync.flush()], sync.restarts
+
+    once, _ = played(1, restart_ns=0)
+    twice, restarts = played(2, restart_ns=0)
+    assert len(once) > 20 and restarts == 1
+    assert twice == once + once
+    never_restarted, _ = played(2, restart_ns=None)
+    assert len(never_restarted) <= len(once) + 1, 'without it, the second play is lost (but its last frame)'
+
+
 def test_queue_size_bounds_memory():
     sync = ApproximateTimeSynchronizer(['a', 'b'], queue_size=5, max_interval_ns=MAX_INTERVAL_NS)
     assert all(sync.add('a', frame * PERIOD_NS, frame) == [] for frame in range(100))

@@ -10,7 +10,7 @@ frame's own evidence beside the pose carried over from the last frame.
 import numpy as np
 
 from mvpose_nodes.body.kinematics import bone_lengths, forward_kinematics
-from mvpose_nodes.body.model import JOINT_INDEX, PARAMETER_NAMES
+from mvpose_nodes.body.model import JOINT_INDEX, PARAMETER_INDEX, PARAMETER_NAMES
 from mvpose_nodes.body.triangulation import best_assignment, triangulate
 from mvpose_nodes.fitting.stage_search import KEYPOINT_JOINT
 from mvpose_nodes.vision.features import FRONT_SKIN_FRACTION
@@ -152,3 +152,39 @@ def completed_joints(found, lengths):
     joints[JOINT_INDEX['left_shoulder']] = found['neck'] - lengths['clavicle'] * right
     joints[JOINT_INDEX['right_shoulder']] = found['neck'] + lengths['clavicle'] * right
     return joints
+
+
+def guessed_parameters(views, lengths, ankle_height):
+    """A best guess (29,) for a frame set the keypoints cannot initialise from (root, neck and head not in two
+    views), so that it still gets an answer: the rest pose of bone `lengths` {key: [m]} standing on the floor
+    (ankles at ankle_height × the template's stature), its pelvis at the views' root keypoint, triangulated
+    from two views or more; from one view, on the root's ray at the depth of the outline's lowest point put
+    on the floor (a foot), or without an outline at the standing pelvis's height. It faces the first camera
+    that sees it. None when no view has a root keypoint, or its ray does not reach the floor or that height."""
+    seen = [view for view in views if 'root' in view.keypoints]
+    if not seen:
+        return None
+    rest, _ = forward_kinematics(np.zeros(len(PARAMETER_NAMES)), lengths)
+    pelvis_height = ankle_height * TEMPLATE_HEIGHT - rest[[JOINT_INDEX['left_ankle'], JOINT_INDEX['right_ankle']], 2].min()
+    pelvis = None
+    if len(seen) >= 2:
+        pelvis = robust_triangulate([view.camera for view in seen], np.array([view.keypoints['root'][:2] for view in seen]),
+                                    np.array([view.keypoints['root'][2] for view in seen], float), np.inf)
+    if pelvis is None:
+        view = seen[0]
+        camera, axis = view.camera, view.camera.R[2]   # the optical axis in the world
+        (root,) = camera.rays(camera.undistort_pixels(np.array([view.keypoints['root'][:2]])))
+        on_floor = view.outline is not None and len(view.outline.points)
+        point, height = ((view.outline.points[np.argmax(view.outline.points[:, 1])], 0.0) if on_floor
+                         else (view.keypoints['root'][:2], pelvis_height))
+        (ray,) = camera.rays(camera.undistort_pixels(np.array([point], float)))
+        if abs(ray[2]) < 1e-6 or (height - camera.center[2]) / ray[2] <= 0:
+            return None
+        depth = np.dot(ray, axis) * (height - camera.center[2]) / ray[2]
+        pelvis = camera.center + root * depth / np.dot(root, axis)
+    towards = seen[0].camera.center - pelvis
+    parameters = np.zeros(len(PARAMETER_NAMES))
+    parameters[[PARAMETER_INDEX['torso_x'], PARAMETER_INDEX['torso_y'], PARAMETER_INDEX['torso_z']]] = (
+        pelvis[0], pelvis[1], pelvis_height)
+    parameters[PARAMETER_INDEX['torso_rz']] = np.arctan2(-towards[0], towards[1])   # the rest pose faces +y
+    return parameters

@@ -20,7 +20,9 @@ Beyond ROS: channels form groups (a camera's feature topics). A group whose newe
 `timeout_ns` behind the input clock is silent; sets then form from the other groups ("degraded" sets, which
 name the missing groups) until it is heard again. The input clock is the newest stamp matched, not wall time,
 so a silent group is noticed only while others keep producing, and the result is deterministic in tests and
-the same when replaying a bag at any speed.
+the same when replaying a bag at any speed. Also beyond ROS: `flush()` gives the sets still pending when the input
+ends (a bag's last frame set, which would otherwise wait for a later message for ever), and a channel whose stamps
+go back (`restart_ns`: a bag played again) starts the matching afresh instead of dropping the second play.
 
 HeldSets keeps sets back until their cameras' calibration is in; PendingSets hands the newest sets to a
 worker that is slower than the input (PendingSets: beyond its depth, the oldest are skipped and counted);
@@ -48,34 +50,80 @@ class SyncedSet:
 class ApproximateTimeSynchronizer:
     """Feed messages with `add`; it returns the sets they complete. `channels`: hashable names; `groups`:
     channel → group name (default: each channel its own group); `queue_size`: messages kept per channel;
-    `timeout_ns`: input-clock silence after which a group is left out (None: never)."""
+    `timeout_ns`: input-clock silence after which a group is left out (None: never); `restart_ns`: a message
+    stamped more than this before the newest of its own channel means the input has started again (a bag
+    played again, or looped): what is pending is flushed and matching starts afresh (None: never; the message
+    would be dropped as one that crosses the sets). At least `reorder_window_ns`."""
 
     def __init__(self, channels, queue_size=10, max_interval_ns=None, groups=None, timeout_ns=None,
-                 reorder_window_ns=0):
+                 reorder_window_ns=0, restart_ns=None):
         self.channels = tuple(channels)
         self.groups = dict(groups) if groups is not None else {channel: channel for channel in self.channels}
         self.queue_size, self.max_interval_ns = queue_size, max_interval_ns
-        self.timeout_ns, self.reorder_window_ns = timeout_ns, reorder_window_ns
+        self.timeout_ns, self.reorder_window_ns, self.restart_ns = timeout_ns, reorder_window_ns, restart_ns
+        self.restarts = 0  # times the input started again
+        if restart_ns is not None and restart_ns < reorder_window_ns:
+            raise ValueError(f'restart_ns ({restart_ns}) must be at least reorder_window_ns ({reorder_window_ns})')
         self._channel_index = {channel: index for index, channel in enumerate(self.channels)}
+        self._start()
+
+    def _start(self):
+        """The state of a synchroniser that has received nothing."""
         self._queues = {channel: [] for channel in self.channels}  # [(stamp, message)] sorted by stamp
         self._last_used_ns = {}  # channel → stamp of its message in the latest set
         self._group_heard_ns = {}  # group → newest stamp matched
         self._held = []  # heap of (stamp, channel index, arrival number, message) inside the reorder window
         self._arrivals = itertools.count()
         self._newest_ns = None  # newest stamp received
+        self._channel_newest_ns = {}  # channel → its newest stamp received
         self._clock_ns = self._start_ns = None  # newest / first stamp matched
+        self._ended = False  # within flush(): no message is still to come
 
     def add(self, channel, stamp_ns, message):
         """Take one message; return the sets completed by it, oldest first (often none, sometimes several)."""
+        newest_ns = self._channel_newest_ns.get(channel)
+        if self.restart_ns is not None and newest_ns is not None and stamp_ns < newest_ns - self.restart_ns:
+            sets = self.flush()
+            self._start()
+            self.restarts += 1
+            return sets + self.add(channel, stamp_ns, message)
         # The channel index and arrival number break stamp ties, so messages themselves are never compared.
         heapq.heappush(self._held, (stamp_ns, self._channel_index[channel], next(self._arrivals), message))
+        self._channel_newest_ns[channel] = stamp_ns if newest_ns is None else max(newest_ns, stamp_ns)
         self._newest_ns = stamp_ns if self._newest_ns is None else max(self._newest_ns, stamp_ns)
+        return self._match(self._newest_ns - self.reorder_window_ns)
+
+    def flush(self):
+        """The sets the messages received so far still make when no more come (the end of a bag, or every
+        camera stopped): the reorder window's messages matched, then, as if every channel had ended, the
+        candidate of each search published instead of waiting for a message that could prove it the
+        narrowest, and cameras (groups) with no message left out as silent ones are (degraded sets); one
+        that has sent only some of its channels' messages is waited for. Without it the newest set waits for
+        the next message for ever: with jittered stamps ROS's ApproximateTime publishes a set only once
+        every channel has a message past it. Later messages are taken as usual; a camera left out of a
+        flushed set whose messages come after it forms a set of the same stamp (flush on real silence
+        only: the nodes call it after camera_timeout without input)."""
+        sets = self._match(None)
+        self._ended = True
+        try:
+            return sets + self._ready_sets()
+        finally:
+            self._ended = False
+
+    def _match(self, until_ns):
+        """Move the held messages stamped up to until_ns (None: all) into the queues, in stamp order; the
+        sets that completes."""
         sets = []
-        while self._held and self._held[0][0] <= self._newest_ns - self.reorder_window_ns:
+        while self._held and (until_ns is None or self._held[0][0] <= until_ns):
             stamp, index, _, held_message = heapq.heappop(self._held)
             self._enqueue(self.channels[index], stamp, held_message)
-            while (positions := self._search()) is not None:
-                sets.append(self._publish(positions))
+            sets += self._ready_sets()
+        return sets
+
+    def _ready_sets(self):
+        sets = []
+        while (positions := self._search()) is not None:
+            sets.append(self._publish(positions))
         return sets
 
     def _enqueue(self, channel, stamp_ns, message):
@@ -93,6 +141,8 @@ class ApproximateTimeSynchronizer:
     def _silent(self, channel):
         """Whether the channel's group has not been heard for longer than the timeout (a group never heard
         counts from the first stamp matched)."""
+        if self._ended:
+            return True
         heard_ns = self._group_heard_ns.get(self.groups[channel], self._start_ns)
         return self.timeout_ns is not None and self._clock_ns - heard_ns > self.timeout_ns
 
@@ -116,6 +166,8 @@ class ApproximateTimeSynchronizer:
                 return None  # wait for messages
             if silent:  # no candidate yet, so all positions are 0: leave the silent groups out
                 silent_groups = {self.groups[channel] for channel in silent}
+                if self._ended and any(self._queues[c] for c in live if self.groups[c] in silent_groups):
+                    return None  # a camera that has sent part of its messages is not silent: wait for the rest
                 for channel in live:
                     if self.groups[channel] in silent_groups:
                         self._queues[channel].clear()  # an incomplete group's leftovers can never be used

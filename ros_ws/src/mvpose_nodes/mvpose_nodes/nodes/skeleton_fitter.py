@@ -11,7 +11,9 @@ poses, the 29 parameters, the six stages), the 29 parameters as /mvpose/joint_st
 RViz and Foxglove); the node's state and CPU per stage once a second on /diagnostics
 (diagnostic_msgs/DiagnosticArray). A camera whose features stop is left out after camera_timeout
 (status DEGRADED) and rejoins when they come back. A frame set with fewer than two cameras seeing the
-person gets STATUS_LOST, repeating the last fitted pose.
+person gets STATUS_LOST, repeating the last fitted pose (before the first fit: STATUS_INITIALISING with a
+standing best guess). When the input stops for camera_timeout, the frame sets still in the synchronisers are
+flushed and fitted (a bag's end); a bag played again starts them afresh.
 
 With request_frames (the default) the fitter also paces the cameras: it synchronises the stamps they
 announce on /cam<K>/frame_available (std_msgs/Header, one per image) and, each time nothing waits before
@@ -59,7 +61,8 @@ class SkeletonFitterNode(MultiCameraNode):
         # a fast input never builds a backlog.
         self.pending = PendingSets(self.values['pending_frame_sets'])
         self.prepared = PendingSets(self.values['pending_frame_sets'])
-        self.counts = {'frame sets fitted': 0, 'frame sets skipped (stale)': 0, 'frame sets without a fit': 0}
+        self.counts = {'frame sets fitted': 0, 'frame sets skipped (stale)': 0, 'frame sets without a fit': 0,
+                       'frame sets guessed (before the first fit)': 0}
         self.requests = None
         if self.values['request_frames']:
             self.requests = FrameRequests(self.values['camera_timeout'])
@@ -88,6 +91,14 @@ class SkeletonFitterNode(MultiCameraNode):
             for announced in self.announcements.add((camera, 'frame_available'), stamp_ns(header), header):
                 self.requests.announce(announced)
         self.request_next()
+
+    def end_of_input(self):
+        """The last announced frame sets too, so that the cameras are asked for them."""
+        if self.requests is not None:
+            with self.clock('sync'):
+                for announced in self.announcements.flush():
+                    self.requests.announce(announced)
+            self.request_next()
 
     def request_next(self):
         """Ask the cameras for the newest announced frame set if nothing waits before the fitter's stages
@@ -137,7 +148,9 @@ class SkeletonFitterNode(MultiCameraNode):
         self.counts['frame sets skipped (stale)'] += skipped
         for cause, text in result.problems:
             self.report_once(cause, text)
-        if result.message is None or result.message.status == Skeleton.STATUS_LOST:
+        if result.guessed:
+            self.counts['frame sets guessed (before the first fit)'] += 1
+        elif result.message is None or result.message.status == Skeleton.STATUS_LOST:
             self.counts['frame sets without a fit'] += 1
         else:
             self.counts['frame sets fitted'] += 1

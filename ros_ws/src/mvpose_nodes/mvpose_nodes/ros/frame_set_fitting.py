@@ -4,17 +4,20 @@ features it computes itself, so the suite measures exactly what the node would p
 
 The status (Skeleton.STATUS_*): INITIALISING on a frame that (re)started the fit from the keypoints;
 DEGRADED when a configured camera gave nothing usable or a stage had no evidence; LOST when fewer than
-two cameras see the person (the joints repeat the last fitted pose; nothing before the first fit), or
+two cameras see the person (the joints repeat the last fitted pose), or
 when the fit has lost the person (fitter.Fit.lost: the joints are that fit, and the next frame set
-re-initialises); OK otherwise.
+re-initialises); OK otherwise. Before the first fit, a frame set the keypoints cannot initialise from
+gets INITIALISING with a best guess (initialisation.guessed_parameters: standing at the root keypoint) if
+any camera sees the person, and nothing if none does.
 """
 from dataclasses import dataclass
 
 from mvpose_msgs.msg import LabelledContour, Skeleton
 
-from mvpose_nodes.body.kinematics import forward_kinematics
+from mvpose_nodes.body.kinematics import bone_lengths, forward_kinematics
 from mvpose_nodes.body.model import PARAMETER_NAMES
 from mvpose_nodes.fitting.fitter import SkeletonFitter, view_from_features
+from mvpose_nodes.fitting.initialisation import TEMPLATE_HEIGHT, guessed_parameters
 from mvpose_nodes.ros.conversions import (contour_from_message, keypoints_from_messages, skeleton_message,
                                           stage_messages)
 from mvpose_nodes.ros.diagnostics import StageClock
@@ -23,10 +26,11 @@ from mvpose_nodes.ros.diagnostics import StageClock
 @dataclass
 class FrameSetResult:
     """What one frame set gave: the Skeleton to publish (None: nothing to publish), its 29 parameters,
-    and problems [(cause, text)] worth logging once per cause."""
+    problems [(cause, text)] worth logging once per cause, and whether the Skeleton is a best guess, not a fit."""
     message: object = None
     parameters: object = None
     problems: list = None
+    guessed: bool = False
 
 
 @dataclass
@@ -86,12 +90,12 @@ class FrameSetFitter:
         skipped_text = f'{skipped} stale frame set(s) skipped before this one' if skipped else ''
         if len(views) < 2:
             return self.lost(stamp_ns, problems, 'few views',
-                             joined(f'fewer than 2 cameras with a person at {stamp_ns} ns', skipped_text))
+                             joined(f'fewer than 2 cameras with a person at {stamp_ns} ns', skipped_text), views)
         try:
             with self.clock('fit'):
                 fit = self.fitter.fit(stamp_ns / 1e9, views)
         except ValueError as error:
-            return self.lost(stamp_ns, problems, 'fit', joined(f'no fit at {stamp_ns} ns: {error}', skipped_text))
+            return self.lost(stamp_ns, problems, 'fit', joined(f'no fit at {stamp_ns} ns: {error}', skipped_text), views)
         used = {v.camera.number for v in views}
         degraded = bool(prepared.missing_cameras) or used != set(self.cameras) or not all(s.fitted for s in fit.stages)
         status = (Skeleton.STATUS_LOST if fit.lost else Skeleton.STATUS_INITIALISING if fit.initialised
@@ -104,16 +108,22 @@ class FrameSetFitter:
                                        status=status, status_message=reason, fit_time=fit.seconds)
         return FrameSetResult(message, fit.parameters, problems)
 
-    def lost(self, stamp_ns, problems, cause, reason):
-        """STATUS_LOST repeating the last fitted pose (no message before the first fit)."""
-        problems.append((cause, f'{reason} (logged once; STATUS_LOST with the last pose while it lasts)'))
-        parameters = self.fitter.parameters
+    def lost(self, stamp_ns, problems, cause, reason, views):
+        """STATUS_LOST repeating the last fitted pose; before the first fit, STATUS_INITIALISING with a best
+        guess from the `views` (fitter.View) if one sees the person, else no message."""
+        problems.append((cause, f'{reason} (logged once; STATUS_LOST with the last pose while it lasts, '
+                                'a standing guess before the first fit)'))
+        parameters, lengths, status = self.fitter.parameters, self.fitter.lengths, Skeleton.STATUS_LOST
         if parameters is None:
-            return FrameSetResult(None, None, problems)
-        joints, _ = forward_kinematics(parameters, self.fitter.lengths)
+            lengths = lengths or bone_lengths(TEMPLATE_HEIGHT)
+            parameters = guessed_parameters(views, lengths, self.fitter.settings.ankle_height)
+            if parameters is None:
+                return FrameSetResult(None, None, problems)
+            status, reason = Skeleton.STATUS_INITIALISING, f'best guess (standing at the root keypoint): {reason}'
+        joints, _ = forward_kinematics(parameters, lengths)
         message = skeleton_message(joints, stamp_ns, parameter_names=list(PARAMETER_NAMES),
-                                   parameters=parameters.tolist(), status=Skeleton.STATUS_LOST, status_message=reason)
-        return FrameSetResult(message, parameters, problems)
+                                   parameters=parameters.tolist(), status=status, status_message=reason)
+        return FrameSetResult(message, parameters, problems, guessed=status == Skeleton.STATUS_INITIALISING)
 
 
 def joined(*parts):

@@ -38,6 +38,10 @@ class MultiCameraNode(ReportOnce, Node):
         self.held = HeldSets(self.values['calibration_wait'])
         self.given_up = set()     # cameras whose calibration a frame set stopped waiting for
         self.create_timer(0.1, self.release_held)
+        # When the input stops (a bag's end), the last frame sets are still in the synchroniser, waiting
+        # for messages that would prove them complete: flushed once nothing has come for camera_timeout.
+        self.last_input = None    # time.monotonic() of the newest input message since the last flush
+        self.create_timer(0.1, self.flush_when_idle)
         for k in cameras:
             for topic, kind in inputs.items():
                 self.create_subscription(kind, f'/cam{k}/{topic}', self.receiver(k, topic), 10)
@@ -46,12 +50,14 @@ class MultiCameraNode(ReportOnce, Node):
 
     def synchronizer(self, topics):
         """An ApproximateTimeSynchronizer of the configured cameras' `topics` (channels (camera, topic), a
-        camera's topics one group) with the node's queue_size, max_interval and camera_timeout."""
+        camera's topics one group) with the node's queue_size, max_interval and camera_timeout; a
+        topic whose stamps go back (a bag played again) starts it afresh (the topics arrive in stamp order)."""
         channels = [(k, topic) for k in self.cameras for topic in topics]
         return ApproximateTimeSynchronizer(channels, queue_size=self.values['queue_size'],
                                            max_interval_ns=int(self.values['max_interval'] * 1e9),
                                            groups={channel: channel[0] for channel in channels},
-                                           timeout_ns=int(self.values['camera_timeout'] * 1e9))
+                                           timeout_ns=int(self.values['camera_timeout'] * 1e9),
+                                           restart_ns=0)
 
     def calibration_receiver(self, camera, kind):
         """Keep the camera's messages; once both are there, its Camera (converted once, not per frame)."""
@@ -70,11 +76,27 @@ class MultiCameraNode(ReportOnce, Node):
 
     def receiver(self, camera, topic):
         def receive(message):
+            self.last_input = time.monotonic()
             with self.clock('sync'):
                 for frame_set in self.sync.add((camera, topic), stamp_ns(message.header), message):
                     self.held.add(frame_set, time.monotonic())
             self.release_held()
         return receive
+
+    def flush_when_idle(self):
+        """Once no input has come for camera_timeout [s] of wall time, the frame sets the synchroniser still
+        holds (ApproximateTimeSynchronizer.flush), then end_of_input for the subclass's own."""
+        if self.last_input is None or time.monotonic() - self.last_input <= self.values['camera_timeout']:
+            return
+        self.last_input = None
+        with self.clock('sync'):
+            for frame_set in self.sync.flush():
+                self.held.add(frame_set, time.monotonic())
+        self.end_of_input()
+        self.release_held()
+
+    def end_of_input(self):
+        """Called when the input has stopped (flush_when_idle): flush any synchroniser of the subclass's own."""
 
     def awaited_cameras(self, frame_set):
         """The cameras of a frame set whose calibration has not come (and is still waited for)."""

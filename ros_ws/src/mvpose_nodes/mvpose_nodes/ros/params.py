@@ -196,7 +196,8 @@ def multi_camera_parameters(what):
         Parameter('max_interval', 0.02, '[s] largest stamp spread within one frame set', range=(0.0, 10.0),
                   read_only=True),
         Parameter('camera_timeout', 1.0, '[s] of input time after which a silent camera is left out '
-                  '(status DEGRADED)', range=(0.01, 60.0), read_only=True),
+                  '(status DEGRADED); after this much wall time without input the last frame sets are '
+                  'flushed (a bag\'s end)', range=(0.01, 60.0), read_only=True),
         Parameter('calibration_wait', 2.0, '[s] longest a frame set waits for a camera\'s camera_info and '
                   'camera_pose that have not come yet (then it goes on without that camera)', range=(0.0, 60.0),
                   read_only=True),
