@@ -121,6 +121,7 @@ class ApproximateTimeSynchronizer:
         return sets
 
     def _ready_sets(self):
+        """The sets the queues make now, oldest first, each taken out of them."""
         sets = []
         while (positions := self._search()) is not None:
             sets.append(self._publish(positions))

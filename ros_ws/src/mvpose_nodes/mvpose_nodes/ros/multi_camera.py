@@ -77,9 +77,13 @@ class MultiCameraNode(ReportOnce, Node):
     def receiver(self, camera, topic):
         def receive(message):
             self.last_input = time.monotonic()
+            restarts = self.sync.restarts
             with self.clock('sync'):
                 for frame_set in self.sync.add((camera, topic), stamp_ns(message.header), message):
                     self.held.add(frame_set, time.monotonic())
+            if self.sync.restarts != restarts:
+                self.get_logger().info(f'/cam{camera}/{topic} went back in time (a bag played again?): '
+                                       'synchronising afresh')
             self.release_held()
         return receive
 
