@@ -46,14 +46,29 @@ def rendered_features(cmu_walk):
     return found
 
 
-def test_a_frame_set_seen_by_one_camera_gets_status_lost_with_the_last_pose(rendered_features, background,
-                                                                              ros_context):
-    fitter = background('run', 'skeleton_fitter', '--ros-args', '-p', f'cameras:={list(CAMERAS)}')
-    node = rclpy.create_node('fitter_feeder')
+def feeding_node(name):
+    """A node that records /mvpose/skeleton and publishes the CAMERAS' feature topics: (node, the Skeletons
+    received, {(camera, topic): Publisher})."""
+    node = rclpy.create_node(name)
     received = []
     node.create_subscription(Skeleton, '/mvpose/skeleton', received.append, LATCHED)
     publishers = {(k, topic): Publisher(node, kind, f'/cam{k}/{topic}', 10)
                   for k in CAMERAS for topic, kind in FEATURES.items()}
+    return node, received, publishers
+
+
+def publish_calibration(node, rendered_features, stamp):
+    """Each camera's camera_info and camera_pose, latched: published at once, the fitter gets them when it
+    subscribes."""
+    for k, (camera, _) in rendered_features.items():
+        for message, topic in zip(calibration_messages(camera, stamp), ('camera_info', 'camera_pose')):
+            Publisher(node, type(message), f'/cam{k}/{topic}', LATCHED).publish(message, subscribers=0)
+
+
+def test_a_frame_set_seen_by_one_camera_gets_status_lost_with_the_last_pose(rendered_features, background,
+                                                                              ros_context):
+    fitter = background('run', 'skeleton_fitter', '--ros-args', '-p', f'cameras:={list(CAMERAS)}')
+    node, received, publishers = feeding_node('fitter_feeder')
     try:
         for publisher in publishers.values():
             publisher.wait_for_subscribers(timeout=30)
@@ -96,16 +111,10 @@ def test_the_last_frame_set_of_the_input_is_fitted_once_the_input_stops(rendered
     ever; once nothing has come for camera_timeout it is flushed and fitted."""
     fitter = background('run', 'skeleton_fitter', '--ros-args', '-p', f'cameras:={list(CAMERAS)}',
                         '-p', 'camera_timeout:=0.5', '-p', 'request_frames:=false')
-    node = rclpy.create_node('last_set_feeder')
-    received = []
-    node.create_subscription(Skeleton, '/mvpose/skeleton', received.append, LATCHED)
-    publishers = {(k, topic): Publisher(node, kind, f'/cam{k}/{topic}', 10)
-                  for k in CAMERAS for topic, kind in FEATURES.items()}
+    node, received, publishers = feeding_node('last_set_feeder')
     stamps = [frame_stamp_ns(60), frame_stamp_ns(61)]
     try:
-        for k, (camera, _) in rendered_features.items():
-            for message, topic in zip(calibration_messages(camera, stamps[0]), ('camera_info', 'camera_pose')):
-                Publisher(node, type(message), f'/cam{k}/{topic}', LATCHED).publish(message, subscribers=0)
+        publish_calibration(node, rendered_features, stamps[0])
         for publisher in publishers.values():
             publisher.wait_for_subscribers(timeout=30)
         for stamp in stamps:
@@ -155,11 +164,7 @@ def test_features_that_come_before_the_calibration_wait_for_it(rendered_features
     newest is fitted (test_frame_sets_faster_than_the_fitter_skip_the_stale_ones)."""
     fitter = background('run', 'skeleton_fitter', '--ros-args', '-p', f'cameras:={list(CAMERAS)}',
                         '-p', 'calibration_wait:=30.0', '-p', 'pending_frame_sets:=0')
-    node = rclpy.create_node('early_features')
-    received = []
-    node.create_subscription(Skeleton, '/mvpose/skeleton', received.append, LATCHED)
-    publishers = {(k, topic): Publisher(node, kind, f'/cam{k}/{topic}', 10)
-                  for k in CAMERAS for topic, kind in FEATURES.items()}
+    node, received, publishers = feeding_node('early_features')
     stamps = [frame_stamp_ns(60), frame_stamp_ns(61)]
     try:
         for publisher in publishers.values():
@@ -173,9 +178,7 @@ def test_features_that_come_before_the_calibration_wait_for_it(rendered_features
             publisher.wait_for_acknowledgements(timeout=10)
         spin_for(node, 1.0)   # the features wait, unanswered
         assert received == [], 'fitted without calibration'
-        for k, (camera, _) in rendered_features.items():
-            for message, topic in zip(calibration_messages(camera, stamps[0]), ('camera_info', 'camera_pose')):
-                Publisher(node, type(message), f'/cam{k}/{topic}', LATCHED).publish(message, subscribers=0)
+        publish_calibration(node, rendered_features, stamps[0])
         spin_until(node, lambda: {stamp_ns(m.header) for m in received} >= set(stamps), 60,
                    'skeletons for both frame sets held before the calibration')
     finally:
@@ -209,9 +212,7 @@ def test_frame_sets_faster_than_the_fitter_skip_the_stale_ones(rendered_features
             for topic, message in zip(FEATURES, feature_messages(features, header)):
                 publishers[(k, topic)].publisher.publish(message)
     try:
-        for k, (camera, _) in rendered_features.items():
-            for message, topic in zip(calibration_messages(camera, stamps[0]), ('camera_info', 'camera_pose')):
-                Publisher(node, type(message), f'/cam{k}/{topic}', LATCHED).publish(message, subscribers=0)
+        publish_calibration(node, rendered_features, stamps[0])
         for publisher in publishers.values():
             publisher.wait_for_subscribers(timeout=30)
         send(stamps[0])   # the first alone: the fitter is ready when the burst comes
