@@ -162,10 +162,13 @@ def test_markers_eval_compares_the_three_methods(tmp_path, synth_bag):
 def test_eval_suite_runs_small_cases_and_prints_every_figure(tmp_path):
     """Issue 13's small suite for CI: 3 drawn cases at 960×540, 10 frame sets each, fitted as the node
     fits them; the table has a row per case, a summary per motion set, and the worst case's pictures.
-    The same draw twice gives the same table (the suite is deterministic)."""
+    The same draw twice gives the same table (the suite is deterministic), the second time from the
+    features cache the first run wrote."""
+    cache = tmp_path / 'cache'
     arguments = ('eval', 'suite', '--cases', 3, '--frames', 10, '--resolution', '960x540', '--seed', 4,
-                 '-o', tmp_path / 'suite')
+                 '--features-cache', cache, '-o', tmp_path / 'suite')
     first = run_mvpose(*arguments, timeout=600)
+    assert len(list(cache.glob('*.pkl'))) == 3 and not list(cache.glob('*.partial'))
     rows = [line for line in first.stdout.splitlines() if line[:5].strip().isdigit()]
     assert len(rows) == 3, first.stdout
     for row in rows:
@@ -176,9 +179,33 @@ def test_eval_suite_runs_small_cases_and_prints_every_figure(tmp_path):
                for line in first.stdout.splitlines()), first.stdout
     assert len(list((tmp_path / 'suite').glob('worst_case_*_error_per_frame.png'))) == 1
     assert len(list((tmp_path / 'suite').glob('worst_case_*_frame_*.png'))) == 1
+    cached = {path: path.stat().st_mtime_ns for path in cache.glob('*.pkl')}
     again = run_mvpose(*arguments[:-1], tmp_path / 'again', '--only', 1, timeout=600)
     repeated = [line for line in again.stdout.splitlines() if line[:5].strip() == '1']
     assert [line.rsplit(maxsplit=1)[0] for line in repeated] == [rows[1].rsplit(maxsplit=1)[0]]   # all but fit ms
+    assert {path: path.stat().st_mtime_ns for path in cache.glob('*.pkl')} == cached, 'read, not written again'
+
+
+def test_suite_features_cache_reads_back_what_it_wrote_and_recomputes_a_damaged_file(tmp_path, capsys,
+                                                                                     monkeypatch):
+    from types import SimpleNamespace
+    from mvpose_nodes.app import suite
+    args = SimpleNamespace(motions='tuning', seed=3, frames=2, cameras=[3, 5], cases=1)
+    [case] = suite.draw_cases(args, (480, 270))
+    motion = suite.case_motion(case)
+
+    computed = suite.case_features(case, motion)   # the messages as the node gets them: float32 fields rounded
+    assert len(computed) == 2 and set(computed[0][1]) == {3, 5}
+    confidence = computed[0][1][3][0].face_visibility
+    assert 0 < confidence < 1 and confidence == np.float32(confidence), 'serialised and read back'
+    assert suite.case_features(case, motion, tmp_path) == computed
+    [stored] = tmp_path.glob('*.pkl')
+    with monkeypatch.context() as patch:
+        patch.setattr(suite, 'render_camera', lambda *_: pytest.fail('rendered again: the cache was not read'))
+        assert suite.case_features(case, motion, tmp_path) == computed
+    stored.write_bytes(b'not a pickle')
+    assert suite.case_features(case, motion, tmp_path) == computed
+    assert 'unreadable' in capsys.readouterr().err and stored.read_bytes() != b'not a pickle'
 
 
 def test_eval_suite_bad_arguments_are_one_line_errors():

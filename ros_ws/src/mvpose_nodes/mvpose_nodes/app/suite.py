@@ -3,17 +3,24 @@
 Each case is drawn at random (seeded: studio/cases.py) over motions (studio/catalogue.py: CMU and AMP
 motion capture and scripted actions, started anywhere), rigs, bodies, clothes and imaging. It is
 rendered with the studio frame by frame, every camera at its own jittered instant; each image goes
-through JPEG at the case's quality, the camera_features pipeline and its messages, and each frame set
-through ros/frame_set_fitting.py, the code the skeleton_fitter node runs. Nothing crosses DDS, so a
-case's figures do not depend on the machine's load.
+through JPEG at the case's quality, the camera_features pipeline and its messages (serialised and read
+back, as they cross DDS), and each frame set through ros/frame_set_fitting.py, the code the
+skeleton_fitter node runs. Nothing crosses DDS, so a case's figures do not depend on the machine's load.
 
 Printed: a row per case (motion, rig, body, mean / median / worst-frame error, frames with a left/right
 swap after the first SWAP_GRACE_FRAMES, frame sets without a skeleton, median fit time), and per motion
 set (tuning, held-out, stress) the mean, median, 90th percentile and worst of the cases' mean errors,
 plus each joint's mean. Written to --output: the worst case's per-frame error plot and an overlay of
 its worst frame over the cameras it used.
+
+With --features-cache DIR a case's feature messages are kept after their first computation and read back
+the next time (rendering and features are three quarters of the suite's time), for fitter work: the key is
+the case and the code and data that make its features (FEATURE_SOURCES and the skin model), so a change
+to those is never read from a stale cache.
 """
+import hashlib
 import math
+import pickle
 import sys
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
@@ -24,6 +31,9 @@ import numpy as np
 from mvpose_nodes.tools.cli import ArgumentParser, UserError, exit_on_user_error
 
 SWAP_GRACE_FRAMES = 10   # the first frames of a case may still be sorting left from right (issue 13's target)
+# What makes a case's feature messages, beside the case itself: the package's folders and modules (relative
+# to it) whose change invalidates --features-cache.
+FEATURE_SOURCES = ('studio', 'vision', 'body', 'ros/conversions.py', 'app/suite.py')
 MOTION_SETS = ('tuning', 'held-out', 'stress')
 
 
@@ -45,6 +55,9 @@ def build_parser(prog):
                              'measuring them, to see how much of the error the measurement of the person costs')
     parser.add_argument('-o', '--output', type=Path, default=Path('output/suite'),
                         help='folder for the worst case\'s pictures (default output/suite)')
+    parser.add_argument('--features-cache', type=Path, metavar='DIR',
+                        help="keep each case's feature messages in DIR and read them back on later runs (for "
+                             'fitter work; renewed when the studio, features or conversion code changes)')
     return parser
 
 
@@ -99,7 +112,8 @@ def main(argv=None, prog='eval suite'):
         progress = Progress(len(cases), 'suite', unit='cases')
         results = []
         with ProcessPoolExecutor(max_workers=args.jobs) as pool:
-            for result in pool.map(run_case, cases, [args.true_lengths] * len(cases)):
+            for result in pool.map(run_case, cases, [args.true_lengths] * len(cases),
+                                   [args.features_cache] * len(cases)):
                 results.append(result)
                 progress.update()
         progress.close()
@@ -174,45 +188,86 @@ def render_camera(case, view, motion, index):
     return cv2.cvtColor(cv2.imdecode(data, cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB)
 
 
-def run_case(case, true_lengths=False):
+def run_case(case, true_lengths=False, features_cache=None):
     """Render, extract and fit every frame set of a case; its CaseResult. true_lengths: the fitter is given
-    the motion's bone lengths instead of measuring the person."""
-    from std_msgs.msg import Header
+    the motion's bone lengths instead of measuring the person; features_cache: a folder for the case's
+    feature messages (case_features), or None."""
     from mvpose_nodes.body.kinematics import lengths_of
     from mvpose_nodes.fitting.settings import FitterSettings
-    from mvpose_nodes.ros.camera_bag import frame_stamp_ns
-    from mvpose_nodes.ros.conversions import feature_messages, joints_from_skeleton, optical_frame, set_stamp
+    from mvpose_nodes.ros.conversions import joints_from_skeleton
     from mvpose_nodes.ros.frame_set_fitting import FrameSetFitter
-    from mvpose_nodes.ros.params import default_skin_model_path
-    from mvpose_nodes.studio import scene
-    from mvpose_nodes.vision.features import FeatureExtractor, FeatureSettings
-    from mvpose_nodes.vision.skin import SkinModel
 
     motion = case_motion(case)
     cameras = {c.number: c for c in case.rig if c.number in case.cameras}
-    views = [scene.prepare_camera(cameras[k], texture_seed=k) for k in case.cameras]
-    skin = SkinModel.load(default_skin_model_path())
-    extractors = {k: FeatureExtractor(FeatureSettings(), skin) for k in case.cameras}
     fitting = FrameSetFitter(FitterSettings(), case.cameras,
                              lengths=lengths_of(motion.joints) if true_lengths else None)
     count = len(motion.joints)
     joints = np.full((count, 15, 3), np.nan)
     statuses, seconds = [None] * count, []
-    for index in range(count):
-        stamp = frame_stamp_ns(index)
-        features = {}
-        for view in views:
-            number = view.camera.number
-            header = set_stamp(Header(), stamp, optical_frame(number))
-            ellipses, contour = feature_messages(extractors[number](render_camera(case, view, motion, index)),
-                                                    header)
-            features[number] = cameras[number], ellipses, contour
-        result = fitting.fit(stamp, features)
+    for index, (stamp, messages) in enumerate(case_features(case, motion, features_cache)):
+        result = fitting.fit(stamp, {number: (cameras[number], *pair) for number, pair in messages.items()})
         if result.message is not None:
             joints[index] = joints_from_skeleton(result.message)
             statuses[index] = result.message.status
             seconds.append(result.message.fit_time)
     return CaseResult(case, statuses, seconds, joints, motion.joints)
+
+
+def case_features(case, motion, cache=None):
+    """Per frame set of the case: (stamp [ns], {camera: (SkinEllipseArray, LabelledContour)}), each image
+    rendered and put through the camera_features pipeline and its messages, serialised and read back as the
+    skeleton_fitter receives them over DDS (the float32 fields rounded); read from the folder `cache` if it
+    has them for this case and code (cache_key), else computed and, with a cache, written there."""
+    from rclpy.serialization import deserialize_message, serialize_message
+    from std_msgs.msg import Header
+    from mvpose_msgs.msg import LabelledContour, SkinEllipseArray
+    from mvpose_nodes.ros.camera_bag import frame_stamp_ns
+    from mvpose_nodes.ros.conversions import feature_messages, optical_frame, set_stamp
+    from mvpose_nodes.ros.params import default_skin_model_path
+    from mvpose_nodes.studio import scene
+    from mvpose_nodes.vision.features import FeatureExtractor, FeatureSettings
+    from mvpose_nodes.vision.skin import SkinModel
+
+    path = None if cache is None else Path(cache) / f'{cache_key(case, default_skin_model_path())}.pkl'
+    serialised = None   # per frame set: (stamp, {camera: (ellipses, contour) serialised})
+    if path is not None and path.is_file():
+        try:
+            serialised = pickle.loads(path.read_bytes())
+        except (pickle.UnpicklingError, EOFError, ValueError) as error:   # computed again and written anew
+            print(f'[suite] {path}: unreadable ({error}); computing the features again', file=sys.stderr)
+    if serialised is None:
+        cameras = {c.number: c for c in case.rig if c.number in case.cameras}
+        views = [scene.prepare_camera(cameras[k], texture_seed=k) for k in case.cameras]
+        skin = SkinModel.load(default_skin_model_path())
+        extractors = {k: FeatureExtractor(FeatureSettings(), skin) for k in case.cameras}
+        serialised = []
+        for index in range(len(motion.joints)):
+            stamp, messages = frame_stamp_ns(index), {}
+            for view in views:
+                number = view.camera.number
+                header = set_stamp(Header(), stamp, optical_frame(number))
+                features = extractors[number](render_camera(case, view, motion, index))
+                messages[number] = tuple(map(serialize_message, feature_messages(features, header)))
+            serialised.append((stamp, messages))
+        if path is not None:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            partial = path.with_suffix('.partial')
+            partial.write_bytes(pickle.dumps(serialised))
+            partial.replace(path)   # a run stopped while writing leaves no half file under the key
+    return [(stamp, {number: (deserialize_message(ellipses, SkinEllipseArray),
+                              deserialize_message(contour, LabelledContour))
+                     for number, (ellipses, contour) in messages.items()}) for stamp, messages in serialised]
+
+
+def cache_key(case, skin_model_path):
+    """SHA-256 (hex) of the case, the skin model and the FEATURE_SOURCES of this package."""
+    package = Path(__file__).resolve().parents[1]
+    digest = hashlib.sha256(pickle.dumps(case, protocol=4))
+    digest.update(Path(skin_model_path).read_bytes())
+    for source in FEATURE_SOURCES:
+        for file in sorted((package / source).rglob('*.py')) if (package / source).is_dir() else [package / source]:
+            digest.update(file.relative_to(package).as_posix().encode() + file.read_bytes())
+    return digest.hexdigest()
 
 
 def report(results):
