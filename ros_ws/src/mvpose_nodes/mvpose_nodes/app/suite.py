@@ -14,7 +14,7 @@ plus each joint's mean. Written to --output: the worst case's per-frame error pl
 its worst frame over the cameras it used.
 
 With --features-cache DIR a case's feature messages are kept after their first computation and read back
-the next time (rendering and features are three quarters of the suite's time), for fitter work: the key is
+the next time (rendering and features are 90 % of the suite's time), for fitter work: the key is
 the case and the code and data that make its features (FEATURE_SOURCES and the skin model), so a change
 to those is never read from a stale cache.
 """
