@@ -5,14 +5,15 @@ triangulated across the views (one disagreeing view left out), left and right to
 where a camera sees it, the person's bone lengths estimated (the template scaled to the height, the
 legs and head measured), and the joints the keypoints do not locate completed from the template, ready
 for paper 004's inverse kinematics. Every frame after that uses `triangulated_joints` too, as the
-frame's own evidence beside the pose carried over from the last frame.
+frame's own evidence beside the pose carried over from the last frame. A frame set too few views locate
+the torso in, before the first fit, gets a standing best guess (`guessed_parameters`) as its answer.
 """
 import numpy as np
 
 from mvpose_nodes.body.kinematics import bone_lengths, forward_kinematics
 from mvpose_nodes.body.model import JOINT_INDEX, PARAMETER_INDEX, PARAMETER_NAMES
 from mvpose_nodes.body.triangulation import best_assignment, triangulate
-from mvpose_nodes.fitting.stage_search import KEYPOINT_JOINT
+from mvpose_nodes.fitting.stage_search import KEYPOINT_JOINT, stage_indices
 from mvpose_nodes.vision.features import FRONT_SKIN_FRACTION
 
 PAIRED_LIMBS = ('knee', 'ankle', 'elbow', 'wrist')   # keypoints that come as a left/right pair
@@ -169,7 +170,8 @@ def guessed_parameters(views, lengths, ankle_height):
     pelvis = None
     if len(seen) >= 2:
         pelvis = robust_triangulate([view.camera for view in seen], np.array([view.keypoints['root'][:2] for view in seen]),
-                                    np.array([view.keypoints['root'][2] for view in seen], float), np.inf)
+                                    np.array([view.keypoints['root'][2] for view in seen], float),
+                                    outlier_rms=np.inf)   # every view kept: nothing better to go on
     if pelvis is None:
         view = seen[0]
         camera, axis = view.camera, view.camera.R[2]   # the optical axis in the world
@@ -184,7 +186,6 @@ def guessed_parameters(views, lengths, ankle_height):
         pelvis = camera.center + root * depth / np.dot(root, axis)
     towards = seen[0].camera.center - pelvis
     parameters = np.zeros(len(PARAMETER_NAMES))
-    parameters[[PARAMETER_INDEX['torso_x'], PARAMETER_INDEX['torso_y'], PARAMETER_INDEX['torso_z']]] = (
-        pelvis[0], pelvis[1], pelvis_height)
+    parameters[stage_indices('torso')[:3]] = pelvis[0], pelvis[1], pelvis_height   # torso_x, torso_y, torso_z
     parameters[PARAMETER_INDEX['torso_rz']] = np.arctan2(-towards[0], towards[1])   # the rest pose faces +y
     return parameters
