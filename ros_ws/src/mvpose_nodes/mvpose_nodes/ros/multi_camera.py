@@ -37,11 +37,10 @@ class MultiCameraNode(ReportOnce, Node):
         # Frame sets that come before a camera's calibration wait for it (calibration_wait), in order.
         self.held = HeldSets(self.values['calibration_wait'])
         self.given_up = set()     # cameras whose calibration a frame set stopped waiting for
-        self.create_timer(0.1, self.release_held)
         # When the input stops (a bag's end), the last frame sets are still in the synchroniser, waiting
         # for messages that would prove them complete: flushed once nothing has come for camera_timeout.
         self.last_input = None    # time.monotonic() of the newest input message since the last flush
-        self.create_timer(0.1, self.flush_when_idle)
+        self.create_timer(0.1, self.flush_when_idle)   # also releases the sets whose calibration wait is over
         for k in cameras:
             for topic, kind in inputs.items():
                 self.create_subscription(kind, f'/cam{k}/{topic}', self.receiver(k, topic), 10)
@@ -89,14 +88,14 @@ class MultiCameraNode(ReportOnce, Node):
 
     def flush_when_idle(self):
         """Once no input has come for camera_timeout [s] of wall time, the frame sets the synchroniser still
-        holds (ApproximateTimeSynchronizer.flush), then end_of_input for the subclass's own."""
-        if self.last_input is None or time.monotonic() - self.last_input <= self.values['camera_timeout']:
-            return
-        self.last_input = None
-        with self.clock('sync'):
-            for frame_set in self.sync.flush():
-                self.held.add(frame_set, time.monotonic())
-        self.end_of_input()
+        holds (ApproximateTimeSynchronizer.flush), then end_of_input for the subclass's own; and the held
+        sets released (release_held: calibration_wait runs out without input too)."""
+        if self.last_input is not None and time.monotonic() - self.last_input > self.values['camera_timeout']:
+            self.last_input = None
+            with self.clock('sync'):
+                for frame_set in self.sync.flush():
+                    self.held.add(frame_set, time.monotonic())
+            self.end_of_input()
         self.release_held()
 
     def end_of_input(self):
