@@ -21,13 +21,39 @@ def mvpose_command(*args):
     return [str(FRONT_DOOR), *map(str, args)]
 
 
+def fault_handler_environment():
+    """This process's environment (as the fixtures set it) with Python's faulthandler on, which prints every
+    thread's stack on SIGABRT: how a test learns where a process hung."""
+    return {**os.environ, 'PYTHONFAULTHANDLER': '1'}
+
+
 def run_mvpose(*args, timeout=60, check=True):
-    """Run `./mvpose ARGS` to completion; the CompletedProcess (text output captured)."""
-    result = subprocess.run(mvpose_command(*args), capture_output=True, text=True, timeout=timeout, cwd=ROOT)
+    """Run `./mvpose ARGS` to completion; the CompletedProcess (text output captured). A process still
+    running after `timeout` [s] fails the test with the Python stacks of its threads (see stacks_of_hung)."""
+    process = subprocess.Popen(mvpose_command(*args), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                               cwd=ROOT, env=fault_handler_environment())
+    try:
+        stdout, stderr = process.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        raise AssertionError(f'./mvpose {" ".join(map(str, args))} did not end within {timeout} s; '
+                             f'{stacks_of_hung(process)}') from None
+    result = subprocess.CompletedProcess(process.args, process.returncode, stdout, stderr)
     if check and result.returncode != 0:
         raise AssertionError(f'./mvpose {" ".join(map(str, args))} exited {result.returncode}:\n'
                              f'{result.stdout}\n{result.stderr}')
     return result
+
+
+def stacks_of_hung(process):
+    """End a process that hangs with SIGABRT, which Python's faulthandler (enabled in its environment)
+    answers by printing every thread's stack: its output so far and those stacks, to say where it hung."""
+    process.send_signal(signal.SIGABRT)
+    try:
+        stdout, stderr = process.communicate(timeout=10)
+    except subprocess.TimeoutExpired:
+        process.kill()
+        stdout, stderr = process.communicate()
+    return f'its output and the stacks of its threads:\n{stdout}\n{stderr}'
 
 
 class Background:
@@ -36,7 +62,7 @@ class Background:
     def __init__(self, *args):
         self.args = args
         self.process = subprocess.Popen(mvpose_command(*args), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                                        text=True, cwd=ROOT, start_new_session=True)
+                                        text=True, cwd=ROOT, start_new_session=True, env=fault_handler_environment())
 
     def wait_for_stderr_line(self, fragment, timeout=20):
         """Block until the process writes a stderr line containing `fragment`; all lines so far."""
@@ -53,7 +79,11 @@ class Background:
 
     def finish(self, timeout=30):
         """Wait for the process to end by itself; (returncode, stdout, stderr)."""
-        out, err = self.process.communicate(timeout=timeout)
+        try:
+            out, err = self.process.communicate(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            raise AssertionError(f'./mvpose {" ".join(map(str, self.args))} did not end within {timeout} s; '
+                                 f'{stacks_of_hung(self.process)}') from None
         return self.process.returncode, out, err
 
     def interrupt(self, timeout=30):
