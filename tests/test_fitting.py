@@ -8,6 +8,8 @@ from mvpose_nodes.body.model import JOINT_NAMES
 from mvpose_nodes.body.camera import studio_rig
 from mvpose_nodes.body.kinematics import lengths_of
 from mvpose_nodes.fitting.fitter import SkeletonFitter, View
+from mvpose_nodes.fitting.initialisation import upright
+from mvpose_nodes.fitting.settings import FitterSettings
 from mvpose_nodes.fitting.stage_search import KEYPOINT_JOINT
 
 pytestmark = pytest.mark.pure
@@ -204,3 +206,37 @@ def test_the_subjects_known_bone_lengths_are_kept_and_fit_closer(cmu_walk):
     errors = {name: np.mean([np.linalg.norm(fit.joints - truth, axis=1).mean()
                              for fit, truth in zip(found, motion.joints)]) for name, found in fits.items()}
     assert errors['given'] < errors['measured'], errors
+
+
+def test_the_person_is_measured_on_the_upright_frame_sets(cmu_walk):
+    """A start crouched (upper body 0.3 m lower, knees bent) measures the person too small; the lengths
+    then come from the frame sets where they stand at full height, as an upright start gives them.
+    Sitting (0.45 m lower) and hands raised over the head (its keypoint 0.35 m higher) measure nothing
+    (initialisation.upright)."""
+    motion = cmu_walk.placed()
+    cameras = studio_rig(cameras=[3, 5, 7])
+    upper_body = [JOINT_NAMES.index(name) for name in JOINT_NAMES if 'knee' not in name and 'ankle' not in name]
+    knees = [JOINT_NAMES.index(name) for name in JOINT_NAMES if 'knee' in name]
+    crouched, sitting, hands_raised = (motion.joints[0].copy() for _ in range(3))
+    crouched[upper_body] -= [0, 0, 0.3]
+    crouched[knees] -= [0, 0, 0.15]
+    sitting[upper_body] -= [0, 0, 0.45]
+    hands_raised[JOINT_NAMES.index('head')] += [0, 0, 0.35]
+    assert all(upright_joints(joints) for joints in motion.joints[:11])
+    assert not upright_joints(sitting) and not upright_joints(hands_raised)
+    started_crouched, started_upright = SkeletonFitter(), SkeletonFitter()
+    started_crouched.fit(0.0, exact_views(cameras, crouched))
+    first = dict(started_crouched.lengths)
+    for frame in range(1, 11):
+        started_crouched.fit(frame / 25.0, exact_views(cameras, motion.joints[frame]))
+        started_upright.fit(frame / 25.0, exact_views(cameras, motion.joints[frame]))
+    assert started_crouched.lengths == pytest.approx(started_upright.lengths, rel=1e-9)
+    true_lengths = lengths_of(motion.joints)
+    assert first['spine'] < 0.9 * true_lengths['spine']
+    assert abs(started_crouched.lengths['spine'] / true_lengths['spine'] - 1) < 0.1
+
+
+def upright_joints(joints):
+    """initialisation.upright on the torso and feet of joints (15, 3) [m], as triangulated joints."""
+    return upright({name: joints[JOINT_NAMES.index(name)] for name in ('pelvis', 'neck', 'head', 'left_ankle',
+                                                                       'right_ankle')}, FitterSettings())

@@ -22,7 +22,7 @@ from mvpose_nodes.body.kinematics import bone_lengths, forward_kinematics, inver
 from mvpose_nodes.body.model import JOINT_INDEX, LABEL_TORSO, STAGE_NAMES
 from mvpose_nodes.fitting.compiled import MAP_LABELS, nearest_capsules, pack_frame
 from mvpose_nodes.fitting.initialisation import (PAIRED_LIMBS, completed_joints, labelled_joints, person_lengths,
-                                                 triangulated_joints)
+                                                 stature, triangulated_joints, upright)
 from mvpose_nodes.fitting.limb_sides import (FacingWatch, LimbTracks, exchange, face_votes, facing_travel,
                                              foot_evidence, mirrored_joints, oriented_view)
 from mvpose_nodes.fitting.objective import boundary_distances, outline_of
@@ -68,6 +68,8 @@ class SkeletonFitter:
         self.settings = settings or FitterSettings()
         self.parameters = None
         self.lengths = None if lengths is None else dict(lengths)
+        # The person's measurements on upright frame sets (measure), while the lengths are not given.
+        self.measurements = [] if lengths is None else None
         self.last_stamp = None
         self.tracks = LimbTracks(self.settings)
         # The stage searches, once the person's bone lengths are known.
@@ -109,6 +111,7 @@ class SkeletonFitter:
                 self.turns += 1
         if found is not None:
             self.tracks.label(stamp, found)
+            self.measure(found)
         parameters, results = self.search_stages(parameters, views, found)
         joints, _ = forward_kinematics(parameters, self.lengths)
         self.facing.append(foot_evidence(views, joints))
@@ -160,6 +163,22 @@ class SkeletonFitter:
             results.append(result)
         return parameters, results
 
+    def measure(self, joints):
+        """Measure the person on triangulated joints {name: (3,) [m]} if they stand upright
+        (initialisation.upright) and fewer than length_frames frame sets have measured them: the bone
+        lengths become the median of the measurements (initialisation.person_lengths) whose stature is
+        within stature_spread of the tallest, as knees bend while walking and a crouch shortens; so
+        neither a first frame set crouched, sitting or with raised arms nor one rough triangulation
+        sets them."""
+        if (self.measurements is None or len(self.measurements) >= self.settings.length_frames
+                or not upright(joints, self.settings)):
+            return
+        self.measurements.append(person_lengths(joints, self.settings))
+        tallest = max(stature(m) for m in self.measurements)
+        standing = [m for m in self.measurements if stature(m) >= (1 - self.settings.stature_spread) * tallest]
+        self.lengths = {key: float(np.median([m[key] for m in standing])) for key in self.lengths}
+        self.stages = StageSearch(self.settings, self.lengths)
+
     def initial_parameters(self, views):
         """Angles (29,) from triangulated keypoints (paper 000 Sec. 3.1 and 6; paper 004), or None: the
         pairs labelled by the face where a view sees it (initialisation.labelled_joints), or all the other
@@ -169,9 +188,10 @@ class SkeletonFitter:
         joints = labelled_joints(views, self.settings)
         if joints is None:
             return None
-        if self.lengths is None:
+        if self.lengths is None:  # measured whatever the posture, until an upright frame set measures better
             self.lengths = person_lengths(joints, self.settings)
             self.stages = StageSearch(self.settings, self.lengths)
+        self.measure(joints)
         mirrored = dict(joints)
         for limb in PAIRED_LIMBS:
             exchange(mirrored, limb)

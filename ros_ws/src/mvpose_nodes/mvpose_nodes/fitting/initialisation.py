@@ -10,7 +10,7 @@ the torso in, before the first fit, gets a standing best guess (`guessed_paramet
 """
 import numpy as np
 
-from mvpose_nodes.body.kinematics import bone_lengths, forward_kinematics
+from mvpose_nodes.body.kinematics import LENGTH_FRACTIONS, bone_lengths, forward_kinematics
 from mvpose_nodes.body.model import JOINT_INDEX, PARAMETER_INDEX, PARAMETER_NAMES
 from mvpose_nodes.body.triangulation import best_assignment, triangulate
 from mvpose_nodes.fitting.stage_search import KEYPOINT_JOINT, stage_indices
@@ -109,6 +109,35 @@ def labelled_joints(views, settings):
     return joints
 
 
+def floor_height(joints, settings):
+    """[m] the floor's height under the person: below the lower ankle by the template's ankle height, or 0
+    (the world frame's floor) without ankles."""
+    ankles = [joints[n][2] for n in ('left_ankle', 'right_ankle') if n in joints]
+    return min(ankles) - settings.ankle_height * TEMPLATE_HEIGHT if ankles else 0.0
+
+
+def upright(joints, settings):
+    """Whether triangulated joints {name: (3,) [m]} show the person standing up with the head keypoint on
+    the head, the posture person_lengths assumes: the pelvis-neck line within upright_tilt_deg of
+    vertical, the pelvis at the template's share of the height (within upright_pelvis: not sitting or
+    bent down), and the head as far from the neck, against the spine, as the template's (within
+    length_trust: not hands raised above it, which the silhouette's top then is)."""
+    spine = joints['neck'] - joints['pelvis']
+    tilt = np.degrees(np.arccos(np.clip(spine[2] / np.linalg.norm(spine), -1.0, 1.0)))
+    floor = floor_height(joints, settings)
+    height = joints['head'][2] - floor
+    standing = LENGTH_FRACTIONS['thigh'] + LENGTH_FRACTIONS['shin'] + settings.ankle_height
+    head = np.linalg.norm(joints['head'] - joints['neck']) / np.linalg.norm(spine)
+    return bool(tilt < settings.upright_tilt_deg and height > 0
+                and abs((joints['pelvis'][2] - floor) / height / standing - 1) < settings.upright_pelvis
+                and abs(head / (LENGTH_FRACTIONS['head'] / LENGTH_FRACTIONS['spine']) - 1) < settings.length_trust)
+
+
+def stature(lengths):
+    """[m] the stature bone lengths {key: [m]} (person_lengths) were scaled from: the spine's template share."""
+    return lengths['spine'] / LENGTH_FRACTIONS['spine']
+
+
 def person_lengths(joints, settings):
     """Bone lengths of the person, on the first frame: the template scaled to the height (head above
     the ankles), then the legs and the head measured (the template's proportions are an average
@@ -116,10 +145,9 @@ def person_lengths(joints, settings):
     The legs: a standing or stance leg is nearly straight, so the longer pelvis–ankle distance is
     about √(hip² + (thigh + shin)²); the knee keypoints are too rough to split it (features.py
     takes them from a band of the silhouette), so the template's thigh : shin proportion is kept."""
-    ankle_height = settings.ankle_height
     ankles = [joints[n][2] for n in ('left_ankle', 'right_ankle') if n in joints]
-    height = joints['head'][2] - (min(ankles) - ankle_height * TEMPLATE_HEIGHT if ankles else 0.0)
-    lengths = bone_lengths(float(np.clip(height / (1 - ankle_height) if ankles else height, 1.2, 2.2)))
+    height = joints['head'][2] - floor_height(joints, settings)
+    lengths = bone_lengths(float(np.clip(height / (1 - settings.ankle_height) if ankles else height, 1.2, 2.2)))
     reach = max((np.linalg.norm(joints[n] - joints['pelvis']) for n in ('left_ankle', 'right_ankle') if n in joints),
                 default=0.0)
     if reach > lengths['hip']:

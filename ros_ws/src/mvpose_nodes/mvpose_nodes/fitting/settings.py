@@ -56,6 +56,16 @@ class FitterSettings:
         12.0, '[px] a triangulation worse than this tries leaving one view out', 0.1, 1000.0)
     length_trust: float = setting(
         0.35, "measured bone lengths within this share of the template's are believed", 0.0, 1.0)
+    length_frames: int = setting(
+        20, 'the bone lengths are the median of the measurements on up to this many upright frame sets '
+            '(initialisation.upright)', 1, 10000)
+    upright_tilt_deg: float = setting(
+        20.0, '[deg] a frame set measures the person only if the pelvis-neck line leans less than this', 0.0, 90.0)
+    upright_pelvis: float = setting(
+        0.15, "... and the pelvis's height above the floor is within this share of the template's (standing) "
+              'share of the height', 0.0, 1.0)
+    stature_spread: float = setting(
+        0.05, 'measurements of a stature more than this share below the tallest measured are left out', 0.0, 1.0)
     facing_evidence: float = setting(
         0.03, "[m] the feet's evidence (limb_sides.foot_evidence) that decides which way a start faces; "
               'below it, the faces the views see decide', 0.0, 10.0)
