@@ -62,7 +62,7 @@ class SkeletonFitter:
     """Frame-by-frame fitting: `fit(stamp_s, views) -> Fit`, keeping the pose and the person's size.
     settings: FitterSettings (default: the measured defaults); lengths: the person's bone lengths
     {length key (kinematics.LENGTH_FRACTIONS): [m]} when known beforehand, else None: measured at the
-    first initialisation (initialisation.person_lengths)."""
+    first initialisation and on the upright frame sets after it (measure), afresh when time goes back."""
 
     def __init__(self, settings=None, lengths=None):
         self.settings = settings or FitterSettings()
@@ -83,6 +83,10 @@ class SkeletonFitter:
         started = time.perf_counter()
         settings = self.settings
         jump = self.last_stamp is None or stamp < self.last_stamp or stamp - self.last_stamp > settings.time_jump
+        if self.last_stamp is not None and stamp < self.last_stamp and self.measurements is not None:
+            # Time went back: another recording (a bag played again, or someone else's), measured afresh,
+            # so that the same bag gives the same skeletons.
+            self.lengths, self.stages, self.measurements = None, None, []
         self.last_stamp = stamp
         initialised = False
         if self.parameters is None or jump or self.lost_fits >= settings.lost_frames:
