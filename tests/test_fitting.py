@@ -249,6 +249,11 @@ def test_a_recording_played_again_is_measured_afresh_and_fitted_the_same(cmu_wal
     measured = len(fitter.measurements)
     fitter.fit(10.0, exact_views(cameras, motion.joints[6]))
     assert len(fitter.measurements) == measured + 1
+    # A new recording whose first frame set cannot initialise keeps nothing of the last one: no pose to
+    # repeat (the node then answers with a best guess), no lengths.
+    with pytest.raises(ValueError):
+        fitter.fit(0.0, exact_views(cameras, motion.joints[0], names=('root',)))
+    assert fitter.parameters is None and fitter.lengths is None
 
 
 def upright_joints(joints):

@@ -85,8 +85,8 @@ class SkeletonFitter:
         jump = self.last_stamp is None or stamp < self.last_stamp or stamp - self.last_stamp > settings.time_jump
         if self.last_stamp is not None and stamp < self.last_stamp and self.measurements is not None:
             # Time went back: another recording (a bag played again, or someone else's), measured afresh,
-            # so that the same bag gives the same skeletons.
-            self.lengths, self.stages, self.measurements = None, None, []
+            # so that the same bag gives the same skeletons; nor is its last pose this recording's.
+            self.lengths, self.stages, self.measurements, self.parameters = None, None, [], None
         self.last_stamp = stamp
         initialised = False
         if self.parameters is None or jump or self.lost_fits >= settings.lost_frames:
