@@ -139,9 +139,10 @@ def stature(lengths):
 
 
 def person_lengths(joints, settings):
-    """Bone lengths of the person, on the first frame: the template scaled to the height (head above
-    the ankles), then the legs and the head measured (the template's proportions are an average
-    person's; a measurement within ±length_trust of the template's value is believed).
+    """Bone lengths of the person in triangulated joints {name: (3,) [m]} (a first frame set, or an upright
+    one: SkeletonFitter.measure): the template scaled to the height (head above the ankles), then the legs
+    and the head measured (the template's proportions are an average person's; a measurement within
+    ±length_trust of the template's value is believed).
     The legs: a standing or stance leg is nearly straight, so the longer pelvis–ankle distance is
     about √(hip² + (thigh + shin)²); the knee keypoints are too rough to split it (features.py
     takes them from a band of the silhouette), so the template's thigh : shin proportion is kept."""
