@@ -111,6 +111,8 @@ def main(argv=None, prog='eval suite'):
               file=sys.stderr, flush=True)
         progress = Progress(len(cases), 'suite', unit='cases')
         results = []
+        import cv2
+        cv2.setNumThreads(1)   # no OpenCV pool thread to fork with a mutex held (as in synth.synthesize)
         with ProcessPoolExecutor(max_workers=args.jobs) as pool:
             for result in pool.map(run_case, cases, [args.true_lengths] * len(cases),
                                    [args.features_cache] * len(cases)):

@@ -190,10 +190,15 @@ def main(argv=None, prog='synth'):
 
 def synthesize(args):
     global _SETTINGS
+    import cv2
     from mvpose_nodes.studio import palette, scene
     from mvpose_nodes.ros.camera_bag import CameraBagWriter
     from mvpose_nodes.app.progress import Progress
 
+    # The workers are forked from this process, so OpenCV must not start its thread pool here: a worker
+    # forked while a pool thread held a mutex blocked for ever in cv2.imencode (seen once in CI, the
+    # worker's stack read with py-spy). Each worker is one of --jobs processes anyway.
+    cv2.setNumThreads(1)
     resolution = parse_resolution(args.resolution)
     motion = make_motion(args)
     rig = [camera.with_distortion([args.distortion, 0, 0, 0, 0]) for camera in studio_rig(resolution)]
