@@ -146,9 +146,10 @@ def person_lengths(joints, settings):
     The legs: a standing or stance leg is nearly straight, so the longer pelvis–ankle distance is
     about √(hip² + (thigh + shin)²); the knee keypoints are too rough to split it (features.py
     takes them from a band of the silhouette), so the template's thigh : shin proportion is kept."""
-    ankles = [joints[n][2] for n in ('left_ankle', 'right_ankle') if n in joints]
     height = joints['head'][2] - floor_height(joints, settings)
-    lengths = bone_lengths(float(np.clip(height / (1 - settings.ankle_height) if ankles else height, 1.2, 2.2)))
+    if 'left_ankle' in joints or 'right_ankle' in joints:
+        height /= 1 - settings.ankle_height
+    lengths = bone_lengths(float(np.clip(height, 1.2, 2.2)))
     reach = max((np.linalg.norm(joints[n] - joints['pelvis']) for n in ('left_ankle', 'right_ankle') if n in joints),
                 default=0.0)
     if reach > lengths['hip']:
