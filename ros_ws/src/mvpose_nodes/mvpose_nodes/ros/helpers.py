@@ -8,12 +8,15 @@ import time
 import rclpy
 from rclpy.duration import Duration
 from rclpy.executors import ExternalShutdownException
+from rclpy.experimental import EventsExecutor
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
 
 from mvpose_nodes.io.bagfile import DEFAULT_QOS_PROFILE
 from mvpose_nodes.ros.params import ParameterError
 from mvpose_nodes.vision.skin import SkinModelError
+
+SPIN_PERIOD = 0.1  # [s] the longest a node takes to see a shutdown
 
 # Reliable, transient-local, depth 1: calibration, and the last skeleton for late subscribers.
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
@@ -41,18 +44,28 @@ def camera_of_namespace(namespace, executable):
 
 def run_node(make_node, args=None):
     """Jazzy's rclpy run pattern for a node that spins until Ctrl-C or shutdown; the exit code.
-    A bad parameter, namespace or model file while the node starts is one line and code 2."""
+    A bad parameter, namespace or model file while the node starts is one line and code 2.
+
+    The node spins in rclpy's EventsExecutor (rclpy.experimental, C++): it takes a third of the CPU of
+    the default SingleThreadedExecutor per callback (the skeleton_fitter's rclpy share 9 -> 3 ms per
+    frame set, each camera_features' 3 -> 1.5; `./mvpose bench`). Its spin() busy-loops at 100 % of a
+    core and ignores Ctrl-C in this rclpy (7.1.6), so it is spun in steps of SPIN_PERIOD, after each of
+    which a shutdown (the signal handler's) is seen."""
     rclpy.init(args=args)
     node = None
+    executor = EventsExecutor()
     try:
         node = make_node()
-        rclpy.spin(node)
+        executor.add_node(node)
+        while rclpy.ok():
+            executor.spin_once(timeout_sec=SPIN_PERIOD)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except (ParameterError, SkinModelError) as error:
         print(f'[ERROR] {make_node.__name__}: {error}', file=sys.stderr)
         return 2
     finally:
+        executor.shutdown()
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
