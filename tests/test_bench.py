@@ -115,3 +115,16 @@ def test_open_loop_table_reports_share_fitted_skips_and_error():
     assert '(2 of 4 fitted, 1 passed over (a later one was fitted), 1 dropped (no answer in 60 s))' in table
     assert 'mean joint error of the fitted frame sets: 35 mm (2 with ground truth)' in table
     assert re.search(r'skeleton_fitter\s+fit 50\.0\s+total 100\.0', table)      # ms per frame set sent
+
+
+def test_transport_table_subtracts_the_bare_header_round_trip():
+    from mvpose_nodes.tools.transport import TransportResult, format_transport
+    results = [TransportResult('(a bare std_msgs/Header)', 'std_msgs/msg/Header', 35, 0.01, 0.01, [0.4, 0.5, 0.6]),
+               TransportResult('/cam3/silhouette', 'sensor_msgs/msg/Image', 2073664, 0.2, 0.2,
+                               [10.0, 16.0, 20.0], unanswered=1)]
+    table = format_transport(results)
+    row = next(line for line in table.splitlines() if line.startswith('  /cam3/silhouette'))
+    # median 16.0 - the Header's median 0.5; p95 of [10, 16, 20]: 16 + 0.9 × (20 - 16)
+    assert row.split()[3:8] == ['0.20', '0.20', '16.00', '19.60', '15.50']
+    assert '(1 unanswered)' in row
+    assert 'round trips: 3 per topic' in table

@@ -33,6 +33,26 @@ def test_bench_runs_every_frame_set_through_the_graph(synth_bag):
     assert '[bench]' in result.stderr       # the progress bar
 
 
+@pytest.mark.timeout(120)
+def test_bench_transport_sends_a_cameras_messages_through_an_echo(synth_bag):
+    """`bench --transport`: every message of camera 3 crosses DDS to the echo process and its header comes
+    back, each with its serialised size (the raw silhouette is height × width bytes of mono8 and more)."""
+    bag = synth_bag('--cameras', 3, 5, 7, '--frames', '70-73', '--resolution', '960x540')
+    table = run_mvpose('bench', bag, '--transport', timeout=90).stdout
+    sizes = {}
+    for topic in ('(a bare std_msgs/Header)', '/cam3/image_raw/compressed', '/cam3/silhouette',
+                  '/cam3/silhouette/compressed', '/cam3/labelled_contour', '/cam3/skin_ellipses'):
+        row = re.search(rf'^  {re.escape(topic)}\s+\S+\s+(\d+)\s+[\d.]+\s+[\d.]+\s+([\d.]+)\s+([\d.]+)',
+                        table, re.MULTILINE)
+        assert row, f'{topic} row missing:\n{table}'
+        assert float(row.group(2)) > 0 and float(row.group(3)) >= float(row.group(2))
+        sizes[topic] = int(row.group(1))
+    assert 'unanswered' not in table
+    assert 960 * 540 < sizes['/cam3/silhouette'] < 960 * 540 + 200
+    assert sizes['/cam3/silhouette/compressed'] < sizes['/cam3/silhouette'] / 20
+    assert 'round trips: 50 per topic' in table
+
+
 def test_demo_runs_the_graph_on_a_bag_and_writes_its_results(tmp_path, synth_bag):
     """The demo's whole path on a 4-frame bag: the graph over DDS fits every frame set, Table 2 is printed,
     and the output folder gets the recorded skeletons, the pictures, the animation and the BVH."""

@@ -1,5 +1,5 @@
-"""`./mvpose bench [BAG] [--rate R]`: throughput, latency and CPU of the real graph over DDS, against the
-bag's decode floor.
+"""`./mvpose bench [BAG] [--rate R | --transport]`: throughput, latency and CPU of the real graph over
+DDS, against the bag's decode floor; or what each of a camera's messages costs to cross DDS.
 
 The graph of launch/mvpose.launch.yaml (three camera_features and the skeleton_fitter) runs as separate
 processes, as in `./mvpose demo`. Instead of `bag play`, this process publishes the bag: the calibration
@@ -29,6 +29,12 @@ over the run (from /proc/PID/stat), peak RSS over the node's whole life (VmHWM).
 goes, stage by stage, comes from the nodes' own /diagnostics (ros/diagnostics.py) at the start and the
 end of the run. In open loop, the fitted frame sets' mean joint error against the bag's
 /mvpose/ground_truth.
+
+--transport: the graph does not run. The first camera's first image with a person in the bag, its
+camera_features messages (silhouette raw and PNG, labelled contour, skin ellipses) and a bare Header are
+sent to an echo process one at a time (tools/transport.py): size, serialisation CPU and round trip per
+topic. The raw silhouette is what the skeleton_fitter used to read per camera and frame set; the contour
+is what it reads now.
 """
 import os
 import sys
@@ -44,6 +50,7 @@ from mvpose_nodes.tools.cli import ArgumentParser, UserError, exit_on_user_error
 DEFAULT_BAG = Path('bags/i3dpost_walk_synth')
 MAKE_DEFAULT_BAG = '`./mvpose synth --cameras 3 5 7 --frames 52-101 -o bags/i3dpost_walk_synth` or `./mvpose demo`'
 DEFAULT_WINDOW = 2
+TRANSPORT_ROUND_TRIPS = 50          # per topic, with --transport
 SUBSCRIBER_TIMEOUT = 30.0           # [s] for the graph to subscribe to the bench's publishers
 DIAGNOSTICS_TIMEOUT = 5.0           # [s] for every node's /diagnostics (published each second)
 DRAIN_TIMEOUT = 10.0                # [s] open loop: skeletons still awaited after the last frame set sent
@@ -249,6 +256,44 @@ def run_bench(bag, window, rate, limit, log_path):
     return result
 
 
+def camera_messages(bag, camera):
+    """[(topic, message)]: camera `camera`'s first compressed image with a person in the bag, and the
+    messages its camera_features node publishes for it (silhouette raw and PNG, contour, ellipses)."""
+    from rclpy.serialization import deserialize_message
+    from sensor_msgs.msg import CompressedImage
+    from std_msgs.msg import Header
+    from mvpose_nodes.app.features import make_extractor
+    from mvpose_nodes.ros.conversions import feature_messages, image_from_compressed, mono_image, png_mono
+
+    extractor = make_extractor(None, None)
+    for _, views in load_frame_sets(bag, (camera,))[1]:
+        image = deserialize_message(views[camera], CompressedImage)
+        features = extractor(image_from_compressed(image))
+        if features.person:
+            ellipses, contour = feature_messages(features, image.header)
+            mask = features.silhouette.astype(np.uint8) * 255
+            base = f'/cam{camera}'
+            return [('(a bare std_msgs/Header)', Header(frame_id=image.header.frame_id)),
+                    (f'{base}/image_raw/compressed', image),
+                    (f'{base}/silhouette', mono_image(mask, image.header)),
+                    (f'{base}/silhouette/compressed', png_mono(mask, image.header)),
+                    (f'{base}/labelled_contour', contour),
+                    (f'{base}/skin_ellipses', ellipses)]
+    raise UserError(f"bag '{bag}': camera {camera} sees no person in any image")
+
+
+def run_transport(bag):
+    from mvpose_nodes.app.graph_run import GRAPH_CAMERAS
+    from mvpose_nodes.ros.helpers import StopSignal
+    from mvpose_nodes.tools.transport import format_transport, measure
+    messages = camera_messages(bag, GRAPH_CAMERAS[0])
+    print(f'[bench] {TRANSPORT_ROUND_TRIPS} round trips of each of {len(messages)} messages through an echo process',
+          file=sys.stderr, flush=True)
+    with StopSignal() as stop:
+        results = measure(messages, TRANSPORT_ROUND_TRIPS, stop)
+    return format_transport(results)
+
+
 def main(argv=None, prog='bench'):
     parser = ArgumentParser(prog=prog, description=__doc__.split('\n\n')[0])
     parser.add_argument('bag', nargs='?', type=Path, help=f'camera bag with cameras 3, 5, 7 (default {DEFAULT_BAG})')
@@ -258,6 +303,9 @@ def main(argv=None, prog='bench'):
                         help="open loop: send each frame set at its time in the bag / R (1.0: the bag's own speed), "
                              'whatever the graph does (default: closed loop, --window)')
     parser.add_argument('--frames', type=int, help='use only the first N frame sets (default all)')
+    parser.add_argument('--transport', action='store_true',
+                        help="instead of running the graph: size, serialisation and DDS round trip of a camera's "
+                             'messages (image in; silhouette raw and PNG, contour, ellipses out)')
     args = parser.parse_args(sys.argv[1:] if argv is None else argv)
     with exit_on_user_error(prog):
         if args.window < 1:
@@ -275,6 +323,9 @@ def main(argv=None, prog='bench'):
                 raise UserError(f'{DEFAULT_BAG} is missing: run {MAKE_DEFAULT_BAG}')
         elif not bag.exists():
             raise UserError(f"bag '{bag}' not found")
+        if args.transport:
+            print(run_transport(bag), flush=True)
+            return 0
         result = run_bench(bag, args.window, args.rate, args.frames, root / 'output' / 'bench' / 'graph.log')
         if bag.is_relative_to(root):
             result.bag = str(bag.relative_to(root))
