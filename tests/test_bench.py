@@ -76,8 +76,9 @@ def test_table_reports_rates_latencies_and_nodes():
                                          for s, t in {1: 0.0, 2: 0.5, 3: 1.0, 4: 1.5}.items()},
                                skeletons={1: (0.4, 0.2), 2: (0.9, 0.2), 3: (2.0, 0.2)}, unfitted=1,
                                decode_ms=[4.0] * 12, usage={'skeleton_fitter': (1.5, 75.0, 200.0)},
-                               wall_seconds=2.0)
+                               wall_seconds=2.0, launched=-3.0, connected=-1.5)
     table = bench.format_table(result)
+    assert 'start-up: launch -> graph connected 1.5 s, -> first images sent 3.0 s, -> first skeleton 3.4 s' in table
     assert '3 of 4 fitted, 1 with too few views' in table
     assert re.search(r'end-to-end\s+1\.50 frame sets/s', table)          # 3 fitted / (2.0 - 0.0) s
     assert re.search(r'decode only\s+83\.3 frame sets/s', table)         # 1000 / (3 x 4 ms)

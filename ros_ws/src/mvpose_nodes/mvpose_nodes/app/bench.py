@@ -187,11 +187,13 @@ def run_bench(bag, window, rate, limit, log_path):
         calibration_publishers = {topic: node.create_publisher(CameraInfo if topic.endswith('info') else PoseStamped,
                                                                topic, LATCHED) for topic in calibration}
         try:
+            result.launched = time.monotonic()
             launch.start()
             pids = launch.pids()
             pids['bench (this process)'] = os.getpid()
             print(f'[bench] starting the graph (log: {log_path})', file=sys.stderr, flush=True)
             wait_for_connections(node, launch, stop)
+            result.connected = time.monotonic()
             wait_for_subscribers(node, {**{f'/cam{k}/image_raw/compressed': p for k, p in image_publishers.items()},
                                         **calibration_publishers}, SUBSCRIBER_TIMEOUT, stop)
             for topic, publisher in calibration_publishers.items():

@@ -135,6 +135,8 @@ class BenchResult:
     usage: dict = field(default_factory=dict)       # node -> (CPU s, CPU %, peak RSS MiB)
     split: dict = field(default_factory=dict)       # node -> cpu_split over the run
     wall_seconds: float = 0.0
+    launched: float = None                          # t the graph's processes were started
+    connected: float = None                         # t every node's topics had matched (graph_run.wait_for_connections)
 
 
 def _number(value, width=8, digits=1):
@@ -184,6 +186,10 @@ def format_table(result):
                   f'{_number(last, 0, 0)} ms (a growing backlog would show as the second far above the first)',
                   f'    mean joint error of the fitted frame sets: {_number(float(np.mean(errors)) if errors else np.nan, 0, 0)} '
                   f'mm ({len(errors)} with ground truth)']
+    if result.launched is not None and result.skeletons:
+        first_sent, first_skeleton = min(result.sent.values()), min(t for t, _ in result.skeletons.values())
+        lines.append(f'  start-up: launch -> graph connected {result.connected - result.launched:.1f} s, -> first images '
+                     f'sent {first_sent - result.launched:.1f} s, -> first skeleton {first_skeleton - result.launched:.1f} s')
     lines.append(f'  node                        CPU s    CPU %   peak RSS MiB   (CPU over the {result.wall_seconds:.1f} s run)')
     for name, (seconds, percent, mib) in result.usage.items():
         lines.append(f'    {name:<24}{_number(seconds, 7)}{_number(percent, 9, 0)}{_number(mib, 15, 0)}')
