@@ -6,16 +6,23 @@ What is written follows rosbag2 for Jazzy (metadata version 9) and the MCAP `ros
 profile: schema encoding `ros2msg` (definition plus dependencies), message encoding
 `cdr`, offered QoS profiles in each channel's metadata, and the bag metadata also
 stored in the file as an MCAP metadata record named `rosbag2`, as rosbag2 does.
-No rclpy here; the ROS side (QoS objects, publishing) is in bag_cli.
+Writing is durable: BagWriter.flush puts every message so far on the disk in complete chunks and keeps
+metadata.yaml current, so a writer killed at any moment leaves a bag whose messages up to its last flush
+BagReader reads back: a file that ends in an unfinished record (no summary, no footer) is read as far as
+its records are complete, as the MCAP tools' `recover` does, and `BagReader.unfinished` says what was cut.
+No rclpy here; the ROS side (QoS objects, publishing) is in tools/bag.py.
 """
 import copy
 import heapq
 import os
+import shutil
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import yaml
 from mcap.reader import NonSeekingReader, make_reader
+from mcap.records import Channel, Message, Schema
+from mcap.stream_reader import StreamReader
 from mcap.writer import CompressionType, Writer
 
 from mvpose_nodes.io.interfaces import full_type_name, schema_text, type_hash
@@ -52,6 +59,60 @@ class TopicInfo:
     serialization_format: str = SERIALIZATION_FORMAT
 
 
+@dataclass
+class Recovery:
+    """What was read of an unfinished MCAP file (its writer killed before it closed the file)."""
+    messages: int       # messages read back: those of every complete chunk
+    cut_bytes: int      # bytes after the last complete record (an unfinished chunk or index), unreadable
+
+
+class UnfinishedScan:
+    """An MCAP file read record by record from its start for as long as its records are complete:
+    `for schema, channel, message in scan` yields every message of its complete chunks, in file order;
+    then `recovery` says how many and what was cut. Any failure of the parser is where the file stops
+    (an unfinished record, or the end of the file where the footer should be)."""
+
+    def __init__(self, stream, size):
+        self.stream, self.size = stream, size
+        self.schemas, self.channels = {}, {}
+        self.recovery = None
+
+    def __iter__(self):
+        self.stream.seek(0)
+        complete_end, count = 0, 0
+        try:
+            for record in StreamReader(self.stream).records:
+                if isinstance(record, Schema):
+                    self.schemas[record.id] = record
+                elif isinstance(record, Channel):
+                    self.channels[record.id] = record
+                elif isinstance(record, Message):
+                    count += 1
+                    yield self.schemas.get(self.channels[record.channel_id].schema_id), \
+                        self.channels[record.channel_id], record
+                complete_end = self.stream.tell()
+        except Exception:  # noqa: BLE001, S110 (see the class docstring)
+            pass
+        self.recovery = Recovery(count, max(self.size - complete_end, 0))
+
+
+@dataclass
+class RecoveredStatistics:
+    """The part of an MCAP Statistics record BagReader reads, counted from an unfinished file's messages."""
+    message_count: int
+    channel_message_counts: dict
+    message_start_time: int
+    message_end_time: int
+
+
+@dataclass
+class RecoveredSummary:
+    """The part of an MCAP Summary BagReader reads, for an unfinished file."""
+    schemas: dict
+    channels: dict
+    statistics: RecoveredStatistics
+
+
 def dump_qos_profiles(profiles):
     return yaml.safe_dump(list(profiles), default_flow_style=False, sort_keys=False)
 
@@ -72,12 +133,12 @@ class BagWriter:
     The directory must not exist yet (as with `ros2 bag record -o`).
     """
 
-    def __init__(self, directory, compression=CompressionType.ZSTD):
+    def __init__(self, directory, compression=CompressionType.ZSTD, file_name=None):
         self.directory = Path(directory)
         if self.directory.exists():
             raise BagError(f"output bag '{self.directory}' already exists; choose another -o or remove it")
         self.directory.mkdir(parents=True)
-        self.file_name = f'{self.directory.name}_0.mcap'
+        self.file_name = file_name or f'{self.directory.name}_0.mcap'
         self._stream = open(self.directory / self.file_name, 'wb')
         self._writer = Writer(self._stream, chunk_size=CHUNK_SIZE, compression=compression)
         self._writer.start(profile='ros2', library='mvpose')
@@ -87,6 +148,7 @@ class BagWriter:
         self._sequence = 0
         self._start_ns = None
         self._end_ns = None
+        self.flush()
 
     def add_topic(self, topic, type_name, offered_qos_profiles=(DEFAULT_QOS_PROFILE,)):
         """Register a topic before writing its messages; a second call for it is a no-op. Missing keys
@@ -113,6 +175,18 @@ class BagWriter:
         self._topics[topic].message_count += 1
         self._start_ns = log_time_ns if self._start_ns is None else min(self._start_ns, log_time_ns)
         self._end_ns = log_time_ns if self._end_ns is None else max(self._end_ns, log_time_ns)
+
+    def flush(self):
+        """Finish the chunk in progress, put everything written so far on the disk (fsync) and rewrite
+        metadata.yaml (atomically): a writer killed after this leaves every message so far readable."""
+        self._writer.flush()
+        os.fsync(self._stream.fileno())
+        self._write_metadata()
+
+    def _write_metadata(self):
+        temporary = self.directory / f'.{METADATA_FILE}.tmp'
+        temporary.write_text(yaml.safe_dump(self.metadata(), default_flow_style=False, sort_keys=False))
+        os.replace(temporary, self.directory / METADATA_FILE)
 
     def metadata(self):
         start = self._start_ns or 0
@@ -144,13 +218,12 @@ class BagWriter:
         if self._stream.closed:
             return
         metadata = self.metadata()
-        text = yaml.safe_dump(metadata, default_flow_style=False, sort_keys=False)
         self._writer.add_metadata('rosbag2', {'serialized_metadata': yaml.safe_dump(
             metadata['rosbag2_bagfile_information'], default_flow_style=False, sort_keys=False),
             'ros_distro': ROS_DISTRO})
         self._writer.finish()
         self._stream.close()
-        (self.directory / METADATA_FILE).write_text(text)
+        self._write_metadata()
 
     def __enter__(self):
         return self
@@ -164,12 +237,14 @@ class BagReader:
 
     Every problem with the input is a BagError with a one-line message naming the path.
     Attributes after opening: `topics` {name: TopicInfo}, `start_ns`, `end_ns`,
-    `message_count`, `files` (the .mcap paths), `metadata` (metadata.yaml content or {}).
+    `message_count`, `files` (the .mcap paths), `metadata` (metadata.yaml content or {}),
+    `unfinished` {mcap path: Recovery} of the files read only as far as their records are complete.
     """
 
     def __init__(self, path):
         self.path = Path(path)
         self.metadata = {}
+        self.unfinished = {}
         self.files = self._find_files()
         self.topics = {}
         self.start_ns = None
@@ -210,9 +285,8 @@ class BagReader:
         return files
 
     def _summary(self, mcap_path, stream):
-        """The file's summary; scanning the whole file when it has none. Raises BagError if damaged.
-
-        Any failure of the MCAP parser means a damaged file, whatever the parser raised."""
+        """The file's summary; scanning the whole file when it has none, and reading it as far as its
+        records are complete when it ends unfinished (_recovered_summary)."""
         if stream.read(len(MCAP_MAGIC)) != MCAP_MAGIC:
             raise BagError(f"'{mcap_path}' is not an MCAP file (it does not start with the MCAP magic bytes)")
         stream.seek(0)
@@ -231,9 +305,28 @@ class BagReader:
             return summary
         except BagError:
             raise
-        except Exception as error:  # noqa: BLE001 (see docstring)
+        except Exception:  # noqa: BLE001: no footer or a damaged end; read what is complete
+            return self._recovered_summary(mcap_path, stream)
+
+    def _recovered_summary(self, mcap_path, stream):
+        """The summary of an unfinished file, from its complete records (UnfinishedScan); BagError when
+        not even its header is complete."""
+        try:
+            stream.seek(0)
+            reader = make_reader(stream)
+            reader.get_header()
+        except Exception as error:  # noqa: BLE001 (as _summary)
             reason = str(error).splitlines()[0] if str(error) else type(error).__name__
             raise BagError(f"'{mcap_path}' is truncated or damaged ({reason})") from None
+        scan = UnfinishedScan(stream, os.fstat(stream.fileno()).st_size)
+        counts, start, end = {}, None, None
+        for _, channel, message in scan:
+            counts[channel.id] = counts.get(channel.id, 0) + 1
+            start = message.log_time if start is None else min(start, message.log_time)
+            end = message.log_time if end is None else max(end, message.log_time)
+        self.unfinished[mcap_path] = scan.recovery
+        return RecoveredSummary(scan.schemas, scan.channels,
+                                RecoveredStatistics(sum(counts.values()), counts, start or 0, end or 0))
 
     def _add_summary(self, mcap_path):
         with open(mcap_path, 'rb') as stream:
@@ -267,6 +360,11 @@ class BagReader:
                 stream.close()
 
     def _file_messages(self, path, stream, topics, start_ns):
+        if path in self.unfinished:   # file order (the order they were written), as far as complete
+            for _, channel, message in UnfinishedScan(stream, os.fstat(stream.fileno()).st_size):
+                if (topics is None or channel.topic in topics) and (start_ns is None or message.log_time >= start_ns):
+                    yield self.topics[channel.topic], message.log_time, message.data
+            return
         try:
             for _, channel, message in make_reader(stream).iter_messages(
                     topics=topics, start_time=start_ns, log_time_order=True):
@@ -274,6 +372,32 @@ class BagReader:
         except Exception as error:  # noqa: BLE001: any parser failure here means a damaged file
             reason = str(error).splitlines()[0] if str(error) else type(error).__name__
             raise BagError(f"'{path}' is damaged: reading messages failed ({reason})") from None
+
+
+def reindex(directory):
+    """Rewrite a bag directory's .mcap file complete (its summary and indexes) from the messages a
+    BagReader reads in it (all of a finished file; those of the complete chunks of an unfinished one),
+    and its metadata.yaml from that file, as `ros2 bag reindex` does. Returns the file's Recovery
+    (None when the file was finished). Bags of one .mcap file, as BagWriter writes them."""
+    directory = Path(directory)
+    if not directory.is_dir():
+        raise BagError(f"bag '{directory}': reindex needs a bag directory")
+    files = sorted(directory.glob('*.mcap'))
+    if len(files) != 1:
+        raise BagError(f"bag '{directory}': reindex handles a bag of one .mcap file (it has {len(files)})")
+    reader = BagReader(files[0])
+    staging = directory / '.reindex'
+    if staging.exists():
+        shutil.rmtree(staging)
+    with BagWriter(staging, file_name=files[0].name) as writer:
+        for topic in reader.topics.values():
+            writer.add_topic(topic.name, topic.type, topic.offered_qos_profiles or (DEFAULT_QOS_PROFILE,))
+        for topic, log_time, data in reader.messages():
+            writer.write(topic.name, data, log_time)
+    os.replace(staging / files[0].name, files[0])
+    os.replace(staging / METADATA_FILE, directory / METADATA_FILE)
+    staging.rmdir()
+    return reader.unfinished.get(files[0])
 
 
 def directory_size(path):

@@ -1,4 +1,4 @@
-"""`bag record | play | info`: rosbag2-compatible MCAP bags without rosbag2.
+"""`bag record | play | info | reindex`: rosbag2-compatible MCAP bags without rosbag2.
 
 The bags are ordinary rosbag2 bags (see bagfile.py): `ros2 bag info/play` of a
 system ROS 2 install and the `rosbags` library read what `bag record` writes,
@@ -8,7 +8,7 @@ import datetime
 import sys
 import time
 
-from mvpose_nodes.io.bagfile import BagReader, BagWriter, directory_size
+from mvpose_nodes.io.bagfile import BagReader, BagWriter, directory_size, reindex
 from mvpose_nodes.tools.cli import ArgumentParser, UserError, exit_on_user_error
 from mvpose_nodes.io.interfaces import MessageTypeError, message_class
 
@@ -16,6 +16,7 @@ from mvpose_nodes.io.interfaces import MessageTypeError, message_class
 LATCHED_TOPIC_SUFFIXES = ('/camera_info', '/camera_pose')
 DISCOVERY_PERIOD = 0.5  # [s] how often `record` looks for new topics
 DRAIN_TIME = 0.5  # [s] how long `record` keeps taking messages after Ctrl-C
+FLUSH_PERIOD = 1.0  # [s] `record` puts what it received on the disk at least this often (BagWriter.flush)
 
 
 def build_parser(prog):
@@ -24,7 +25,11 @@ def build_parser(prog):
 
     record = verbs.add_parser('record', help='record live topics into a new bag directory',
                               description='Record live topics into a rosbag2 directory (metadata.yaml + .mcap). '
-                                          'Stops on Ctrl-C, after writing everything already received.')
+                                          'Stops on Ctrl-C, after writing everything already received. What it '
+                                          f'received is on the disk every {FLUSH_PERIOD:g} s (complete MCAP chunks and '
+                                          'a current metadata.yaml), so a recorder that is killed loses at most '
+                                          'that much: `bag info` and `bag play` read the rest, `bag reindex` '
+                                          'finishes the file.')
     chosen = record.add_mutually_exclusive_group(required=True)
     chosen.add_argument('--topics', nargs='+', metavar='TOPIC', help='topics to record')
     chosen.add_argument('-a', '--all', action='store_true', help='record every topic (new ones too)')
@@ -53,6 +58,13 @@ def build_parser(prog):
 
     info = verbs.add_parser('info', help='summarise a bag', description='Print what a bag holds, like ros2 bag info.')
     info.add_argument('bag', help='bag directory or .mcap file')
+
+    reindex = verbs.add_parser('reindex', help='finish the files of a bag whose recorder was killed',
+                               description='Rewrite every unfinished .mcap file of a bag directory (its recorder '
+                                           'killed before it closed the file) complete, with its summary and '
+                                           'indexes, from the messages of its complete chunks, and metadata.yaml '
+                                           'from the files, as `ros2 bag reindex` does.')
+    reindex.add_argument('bag', help='bag directory')
     return parser
 
 
@@ -63,6 +75,8 @@ def main(argv=None, prog='bag'):
             print(describe(BagReader(args.bag), args.bag))
         elif args.verb == 'play':
             play(args)
+        elif args.verb == 'reindex':
+            print(reindexed(args.bag))
         else:
             record(args)
     return 0
@@ -71,6 +85,18 @@ def main(argv=None, prog='bag'):
 def format_time(ns):
     stamp = datetime.datetime.fromtimestamp(ns / 1e9, tz=datetime.timezone.utc)
     return f'{stamp:%b %d %Y %H:%M:%S.%f}'[:-3] + f' ({ns // 10**9}.{ns % 10**9:09d})'
+
+
+def reindexed(path):
+    """`bag reindex`: rewrite the bag and say what was recovered and cut."""
+    recovery = reindex(path)
+    bag = BagReader(path)
+    done = f'reindexed {path}: {bag.message_count} messages on {len(bag.topics)} topics'
+    if recovery is None:
+        return f'{done} (the file was finished)'
+    cut = (f'{recovery.cut_bytes} bytes after its last complete record (an unfinished chunk) were cut'
+           if recovery.cut_bytes else 'it ended after a complete record')
+    return f'{done}, recovered from an unfinished file; {cut}'
 
 
 def describe(bag, path):
@@ -85,8 +111,12 @@ def describe(bag, path):
         f'Start:             {format_time(bag.start_ns)}',
         f'End:               {format_time(bag.end_ns)}',
         f'Messages:          {bag.message_count}',
-        'Topic information:',
     ]
+    for mcap_path, recovery in bag.unfinished.items():
+        lines.append(f'Unfinished:        {mcap_path.name}: its recorder did not close it; {recovery.messages} '
+                     f'messages read from its complete chunks, {recovery.cut_bytes} bytes after them cut '
+                     f'(`bag reindex` finishes it)')
+    lines.append('Topic information:')
     width = max((len(t) for t in bag.topics), default=0)
     for topic in sorted(bag.topics.values(), key=lambda t: t.name):
         lines.append(f'  Topic: {topic.name:<{width}} | Type: {topic.type} | Count: {topic.message_count} | '
@@ -218,6 +248,7 @@ def record(args):
                 print(f'[record] recording {topic} ({type_name})', file=sys.stderr, flush=True)
 
         node.create_timer(DISCOVERY_PERIOD, discover)
+        node.create_timer(FLUSH_PERIOD, bag.flush)
         discover()
         print(f'[record] writing {output}; Ctrl-C to stop', file=sys.stderr, flush=True)
         while not stop.stopped:
