@@ -6,6 +6,7 @@ scripts as its processes, so no ROS node is needed.
 """
 import json
 import os
+import re
 import shlex
 import signal
 import subprocess
@@ -241,6 +242,56 @@ launch:
     assert '[launch] fine exited with code 0' in lines
 
 
+def test_a_process_with_respawn_is_started_again_until_its_retries_are_used_up(tmp_path, child):
+    """Issue 15: respawn, respawn_delay and respawn_max_retries as ros2 launch reads them: a process that
+    keeps failing is started 1 + 2 times, each restart after the delay, then the launch ends with code 1."""
+    path = write_launch_file(tmp_path, f'''
+launch:
+  - executable: {{name: flaky, cmd: {child('--exit', '3')}, respawn: 'true', respawn_delay: '0.3',
+                  respawn_max_retries: '2'}}
+''')
+    started = time.monotonic()
+    code, lines, _ = run_launcher(path, *TIMEOUTS)
+    assert code == 1
+    assert time.monotonic() - started > 0.6                  # two delays
+    launch_lines = [re.sub(r'pid \d+', 'pid N', line) for line in lines if line.startswith('[launch] ')]
+    assert launch_lines == ['[launch] started flaky (pid N)', '[launch] flaky exited with code 3',
+                            '[launch] respawning flaky in 0.3 s (restart 1 of 2)',
+                            '[launch] started flaky (pid N)', '[launch] flaky exited with code 3',
+                            '[launch] respawning flaky in 0.3 s (restart 2 of 2)',
+                            '[launch] started flaky (pid N)', '[launch] flaky exited with code 3']
+    assert lines.count('[flaky] ready') == 3
+
+
+def test_a_respawning_process_is_not_started_again_when_the_launch_stops(tmp_path, child):
+    ready = tmp_path / 'ready'
+    path = write_launch_file(tmp_path, f'''
+launch:
+  - executable: {{name: server, cmd: {child('--ready-file', ready)}, respawn: true}}
+''')
+    launcher = start_launcher(path, *TIMEOUTS)
+    read_until(launcher, ['[server] ready'])
+    launcher.send_signal(signal.SIGINT)
+    stdout, _ = launcher.communicate()
+    assert launcher.returncode == 130
+    assert 'respawning' not in stdout
+
+
+@pytest.mark.parametrize('key, value, message', [
+    ('respawn', "'yes please'", "'respawn' must be true or false"),
+    ('respawn_delay', "'-1'", "'respawn_delay' must be seconds >= 0"),
+    ('respawn_max_retries', "'1.5'", "'respawn_max_retries' must be a count, or -1 for no limit"),
+    ('on_exit', 'shutdown', "'respawn' and 'on_exit: shutdown' exclude each other")])
+def test_bad_respawn_keys_are_one_line_errors(tmp_path, key, value, message):
+    path = write_launch_file(tmp_path, f'''
+launch:
+  - executable: {{name: x, cmd: 'true', respawn: 'true', {key}: {value}}}
+''')
+    code, lines, stderr = run_launcher(path)
+    assert code == 2 and not lines
+    assert message in stderr and 'launch[0].executable' in stderr and len(stderr.strip().splitlines()) == 1
+
+
 def test_a_required_process_ending_stops_the_others_with_exit_code_100_plus_its_position(tmp_path, child):
     ready = tmp_path / 'server-ready'
     path = write_launch_file(tmp_path, f'''
@@ -342,10 +393,11 @@ NODE = 'pkg: mvpose_nodes, exec: bag, name: a'
     ('launch: [{node: {}, executable: {}}]', 'launch[0]: must be a mapping with one key, the action'),
     ('launch: [{group: [{node: {name: a}}]}]', "launch[0]: unsupported action 'group' (supported: arg, node, "),
     ('launch: [{executable: {name: a, cmd: echo, colour: red}}]',
-     "launch[0].executable: unsupported key 'colour' (supported: cmd, name, output, on_exit)"),
-    (f'launch: [{{arg: {{name: x, default: a}}}}, {{node: {{{NODE}, respawn: true}}}}]',
-     "launch[1].node: unsupported key 'respawn' (supported: pkg, exec, name, namespace, param, remap, "
-     "args, output, on_exit)"),
+     "launch[0].executable: unsupported key 'colour' (supported: cmd, name, output, on_exit, respawn, respawn_delay, "
+     "respawn_max_retries)"),
+    (f'launch: [{{arg: {{name: x, default: a}}}}, {{node: {{{NODE}, sigterm_timeout: 2}}}}]',
+     "launch[1].node: unsupported key 'sigterm_timeout' (supported: pkg, exec, name, namespace, param, remap, "
+     "args, output, on_exit, respawn, respawn_delay, respawn_max_retries)"),
     ('launch: [{arg: {name: x, default: a, choice: [{value: a}]}}]', "launch[0].arg: unsupported key 'choice' ("),
     (f'launch: [{{node: {{{NODE}, param: [{{name: x, type: int}}]}}}}]', "launch[0].node: param[0]: unsupported key 'type'"),
     (f'launch: [{{node: {{{NODE}, remap: [{{from: x, via: z}}]}}}}]', "launch[0].node: remap[0]: unsupported key 'via'"),

@@ -18,6 +18,9 @@ argument NAME. The file is in ros2 launch's YAML format, of which this subset is
         args: --verbose                  # optional: extra arguments, placed before --ros-args
         output: screen                   # optional: screen or both (all output is printed anyway)
         on_exit: shutdown                # optional: when it ends (any code), stop all the others
+        respawn: 'true'                  # optional, not with on_exit: when it ends, start it again after
+        respawn_delay: '2.0'             # this many seconds (default 0), at most respawn_max_retries
+        respawn_max_retries: '5'         # times (default -1: no limit), as ros2 launch does
     - executable:
         name: player
         cmd: bag play bags/x             # a plain command line, no --ros-args added; its first word is
@@ -37,7 +40,8 @@ Each process gets its own session (so a terminal Ctrl-C reaches only the launche
 environment plus PYTHONUNBUFFERED=1, and its stdout and stderr merged and printed as `[NAME] line`.
 On Ctrl-C or SIGTERM to the launcher, or when a process with on_exit: shutdown ends, the launcher sends
 SIGINT to the processes still running, SIGTERM after --sigint-timeout seconds, SIGKILL after
---sigterm-timeout more. A negative code in `[launch] NAME exited with code C` means the process was
+--sigterm-timeout more. A process with respawn is started again when it ends, unless the launch is
+stopping, until its respawn_max_retries are used up (`[launch] respawning NAME (restart K of N)`). A negative code in `[launch] NAME exited with code C` means the process was
 ended by signal -C.
 
 Exit codes:
@@ -99,34 +103,62 @@ class Launch:
         self.sigint_timeout = sigint_timeout
         self.sigterm_timeout = sigterm_timeout
         self.exit_code = None
-        self._popens = []  # in the order of self.specs, as far as started
+        self._popens = []  # in the order of self.specs, as far as started (the newest of a respawned one)
         self._readers = []
         self._reported = set()  # indices of the processes whose exit has been printed
+        self._restarts = [0] * len(self.specs)   # respawns so far, per spec
+        self._respawn_at = {}   # index -> monotonic time its respawn is due
         self._clean_stop_code = None  # set by request_stop: the exit code if everything stops on SIGINT
         self._print_lock = threading.Lock()
 
     def start(self):
-        environment = {**os.environ, 'PYTHONUNBUFFERED': '1'}
         for spec in self.specs:
             try:
-                popen = subprocess.Popen(spec.command, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
-                                         stderr=subprocess.STDOUT, env=environment, text=True, errors='replace',
-                                         start_new_session=True, preexec_fn=_end_with_parent)
+                popen, reader = self._spawn(spec)
             except OSError as error:
                 self.stop()
                 raise UserError(f"cannot start '{spec.name}': {error.strerror}") from None
-            reader = threading.Thread(target=self._forward_output, args=(spec.name, popen.stdout), daemon=True)
-            reader.start()
             self._popens.append(popen)
             self._readers.append(reader)
-            self.say(f'started {spec.name} (pid {popen.pid})')
         return self
+
+    def _spawn(self, spec):
+        popen = subprocess.Popen(spec.command, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
+                                 stderr=subprocess.STDOUT, env={**os.environ, 'PYTHONUNBUFFERED': '1'}, text=True,
+                                 errors='replace', start_new_session=True, preexec_fn=_end_with_parent)
+        reader = threading.Thread(target=self._forward_output, args=(spec.name, popen.stdout), daemon=True)
+        reader.start()
+        self.say(f'started {spec.name} (pid {popen.pid})')
+        return popen, reader
+
+    def _respawn(self):
+        """Start again, once their respawn_delay has passed, the ended processes with respawn and retries left
+        (never while the launch stops); True while any is due."""
+        for index, (spec, popen) in enumerate(zip(self.specs, self._popens)):
+            retries_left = spec.respawn_max_retries < 0 or self._restarts[index] < spec.respawn_max_retries
+            if not spec.respawn or popen.returncode is None or not retries_left or self._clean_stop_code is not None:
+                continue
+            if index not in self._respawn_at:
+                self._respawn_at[index] = time.monotonic() + spec.respawn_delay
+                limit = '' if spec.respawn_max_retries < 0 else f' of {spec.respawn_max_retries}'
+                self.say(f'respawning {spec.name} in {spec.respawn_delay:g} s (restart {self._restarts[index] + 1}{limit})')
+            elif time.monotonic() >= self._respawn_at[index]:
+                del self._respawn_at[index]
+                self._restarts[index] += 1
+                try:
+                    self._popens[index], self._readers[index] = self._spawn(spec)
+                except OSError as error:
+                    self.say(f"cannot start '{spec.name}' again: {error.strerror}")
+                    continue
+                self._reported.discard(index)
+        return bool(self._respawn_at)
 
     def wait(self, timeout=None):
         """Supervise until the launch is over and return its exit code; None if `timeout` seconds pass first."""
         deadline = math.inf if timeout is None else time.monotonic() + timeout
         while self.exit_code is None:
             self._report_exits()
+            respawning = self._respawn()
             started = list(zip(self.specs, self._popens))
             ended_required = next((position for position, (spec, popen) in enumerate(started, 1)
                                    if spec.required and popen.returncode is not None), None)
@@ -137,7 +169,7 @@ class Launch:
                 self.say(f"required process '{spec.name}' ended with code {popen.returncode}; stopping the others")
                 self._stop_all()
                 self.exit_code = EXIT_REQUIRED_ENDED + ended_required
-            elif all(popen.returncode is not None for popen in self._popens):
+            elif not respawning and all(popen.returncode is not None for popen in self._popens):
                 self.exit_code = 0 if all(popen.returncode == 0 for popen in self._popens) else EXIT_PROCESS_FAILED
             elif time.monotonic() >= deadline:
                 return None

@@ -16,6 +16,8 @@ The same file starts the same processes under `ros2 launch` on a system ROS 2 in
         args: --verbose                   # optional: a command line, placed before --ros-args
         output: screen                    # optional: screen or both; every output is printed anyway
         on_exit: shutdown                 # optional: when it ends (any code), stop all the others
+        respawn: 'true'                   # optional, not with on_exit: run it again when it ends, after
+        respawn_delay: '2.0'              # this many s (default 0), at most respawn_max_retries times (-1)
     - executable:
         name: player                      # required
         cmd: bag play bags/x              # a command line; its first word is a mvpose_nodes executable
@@ -27,8 +29,6 @@ holds a substitution is read as YAML once substituted ('3' -> 3), as launch_ros 
 strings. Command lines (`cmd`, `args`) are split like a shell's; a substitution is never split. Relative
 params-file paths resolve against the current directory, as under ros2 launch.
 
-A node runs: EXEC ARGS... --ros-args -r __node:=NAME [-r __ns:=NAMESPACE]
-  [--params-file FILE | -p NAME:=VALUE]... (in `param` order) [-r FROM:=TO]...
 The whole file is checked before anything starts: any other key, action or substitution is a one-line
 error naming the file, the place (launch[2].node, 0-based) and the key.
 """
@@ -46,11 +46,12 @@ from ament_index_python.packages import PackageNotFoundError, get_package_prefix
 from mvpose_nodes.tools.cli import UserError
 
 DEFAULT_PACKAGE = 'mvpose_nodes'
+RESPAWN_KEYS = ('respawn', 'respawn_delay', 'respawn_max_retries')
 # The supported subset of each entity's keys (ros2 launch's names; docs/launch.md maps them).
 ACTION_KEYS = {
     'arg': ('name', 'default', 'description'),
-    'node': ('pkg', 'exec', 'name', 'namespace', 'param', 'remap', 'args', 'output', 'on_exit'),
-    'executable': ('cmd', 'name', 'output', 'on_exit'),
+    'node': ('pkg', 'exec', 'name', 'namespace', 'param', 'remap', 'args', 'output', 'on_exit', *RESPAWN_KEYS),
+    'executable': ('cmd', 'name', 'output', 'on_exit', *RESPAWN_KEYS),
 }
 PARAM_KEYS = ('from', 'name', 'value')
 REMAP_KEYS = ('from', 'to')
@@ -65,10 +66,13 @@ SCALARS = (bool, int, float, str)
 
 @dataclass
 class ProcessSpec:
-    """One checked process of a launch file: what to run and whether its end stops the launch."""
+    """A checked process: what to run, whether its end stops the launch, whether it is run again (respawn)."""
     name: str
     command: list
     required: bool = False
+    respawn: bool = False
+    respawn_delay: float = 0.0
+    respawn_max_retries: int = -1
 
 
 @dataclass
@@ -270,7 +274,7 @@ def _node(body, substitute):
         except UserError as error:
             raise UserError(f'remap[{index}]: {error}') from None
         command += ['-r', f'{original}:={replacement}']
-    return ProcessSpec(name, command, _required(body, substitute))
+    return ProcessSpec(name, command, *_supervision(body, substitute))
 
 
 def _executable(body, substitute):
@@ -280,18 +284,32 @@ def _executable(body, substitute):
     command = _command_line(body, 'cmd', substitute)
     if not command:
         raise UserError("'cmd' is empty")
-    return ProcessSpec(name, [_program_path(command[0]), *command[1:]], _required(body, substitute))
+    return ProcessSpec(name, [_program_path(command[0]), *command[1:]], *_supervision(body, substitute))
 
 
-def _required(body, substitute):
-    """Whether the process is required (on_exit: shutdown, the one value ros2 launch takes); checks output too."""
-    output = _string(body, 'output')
+def _supervision(body, substitute):
+    """(required, respawn, respawn_delay [s], respawn_max_retries (-1: no limit)), as ros2 launch reads them."""
+    output, on_exit = _string(body, 'output'), _string(body, 'on_exit')
     if output is not None and substitute(output, 'output') not in OUTPUTS:
         raise UserError(f"'output' must be {' or '.join(OUTPUTS)} (every process's output is printed)")
-    on_exit = _string(body, 'on_exit')
     if on_exit is not None and on_exit != 'shutdown':
         raise UserError(f"'on_exit' must be shutdown, the only value ros2 launch takes; got '{on_exit}'")
-    return on_exit == 'shutdown'
+
+    def value(key, default, valid, expected):
+        raw = body.get(key, default)
+        try:
+            parsed = yaml.safe_load(substitute(raw, key)) if isinstance(raw, str) else raw
+            if valid(parsed):
+                return parsed
+        except yaml.YAMLError:
+            pass
+        raise UserError(f"'{key}' must be {expected}; got '{raw}'")
+    respawn = value('respawn', False, lambda v: isinstance(v, bool), 'true or false')
+    delay = value('respawn_delay', 0.0, lambda v: type(v) in (int, float) and 0 <= v < math.inf, 'seconds >= 0')
+    retries = value('respawn_max_retries', -1, lambda v: type(v) is int and v >= -1, 'a count, or -1 for no limit')
+    if respawn and on_exit:
+        raise UserError("'respawn' and 'on_exit: shutdown' exclude each other (restarted, or ending the launch)")
+    return on_exit == 'shutdown', respawn, float(delay), retries
 
 
 def _command_line(body, key, substitute):
