@@ -110,8 +110,8 @@ def measure(messages, count, stop):
                 raise UserError(f'the transport echo did not subscribe to {TOPIC_PREFIX}/* within {MATCH_TIMEOUT:.0f} s')
             rclpy.spin_once(node, timeout_sec=0.05)
         results, sequence = [], 0
-        for (name, message), publisher, type_name_ in zip(messages, publishers, type_names):
-            result = TransportResult(name, type_name_, *serialisation_ms(message))
+        for (name, message), publisher, kind in zip(messages, publishers, type_names):
+            result = TransportResult(name, kind, *serialisation_ms(message))
             for attempt in range(count + 1):   # the first of each kind warms the path up and is not counted
                 sequence += 1
                 header = header_of(message)
