@@ -103,3 +103,24 @@ def test_a_request_without_an_answer_is_given_up_after_the_timeout():
     assert requests.next_request(10.9, ready=True) is None and requests.unanswered == 0
     assert requests.next_request(11.1, ready=True) == announced(40) and requests.unanswered == 1
     assert requests.skipped == 0
+
+
+def test_a_request_given_up_is_asked_once_more_when_nothing_newer_came():
+    """A request lost at start-up (before a camera's subscription matched) in a stream that then stops
+    (a bench's closed loop, the end of a bag): asked again once, not for ever; a newer announcement or the
+    late answer itself cancels the second asking."""
+    requests = FrameRequests(timeout=1.0)
+    requests.announce(announced(0))
+    assert requests.next_request(10.0, ready=True) == announced(0)
+    assert requests.next_request(11.1, ready=False) is None and requests.unanswered == 1   # busy: kept
+    assert requests.next_request(11.2, ready=True) == announced(0)
+    assert requests.next_request(12.3, ready=True) is None and requests.unanswered == 2    # once only
+    assert requests.next_request(20.0, ready=True) is None and requests.skipped == 0
+
+    requests.announce(announced(40))
+    assert requests.next_request(30.0, ready=True) == announced(40)
+    requests.announce(announced(80))
+    assert requests.next_request(31.1, ready=True) == announced(80)   # the newer set, not the retry
+    assert requests.next_request(32.2, ready=False) is None and requests.retry == announced(80)
+    requests.received(82 * 10**6)   # its features came late after all
+    assert requests.next_request(32.3, ready=True) is None and requests.retry is None

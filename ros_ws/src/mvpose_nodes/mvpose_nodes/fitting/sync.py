@@ -277,16 +277,20 @@ class FrameRequests:
 
     One request is outstanding at a time: it is answered when a frame set at or after its oldest stamp
     arrives, and given up (counted) after `timeout` seconds without one, so a lost message or a camera
-    that missed its image stalls the requests for that long only. Times are float [s] from one monotonic
-    clock; stamps int [ns]."""
+    that missed its image stalls the requests for that long only. A request given up is asked once more
+    when nothing newer has been announced (a request lost at start-up, before a camera's subscription
+    had matched, would otherwise leave a stream that has stopped, or the end of a bag, unfitted; the
+    cameras hold their newest images). Times are float [s] from one monotonic clock; stamps int [ns]."""
 
     def __init__(self, timeout):
         self.timeout = timeout
         self.newest = None            # the newest announced SyncedSet not yet requested
         self.since_request = 0        # sets announced since the last request
-        self.outstanding = None       # (oldest stamp [ns] of the requested set, time of the request [s])
+        self.outstanding = None       # (oldest stamp [ns] of the requested set, time of the request [s],
+                                      #  the SyncedSet, whether this is its second asking)
         self.skipped = 0              # announced sets never requested (a newer one was)
         self.unanswered = 0           # requests given up after `timeout`
+        self.retry = None             # the SyncedSet of a request given up, to ask once more
         self._lock = threading.Lock()
 
     def announce(self, synced):
@@ -300,18 +304,27 @@ class FrameRequests:
         with self._lock:
             if self.outstanding is not None and stamp_ns >= self.outstanding[0]:
                 self.outstanding = None
+            if self.retry is not None and stamp_ns >= min(self.retry.stamps_ns.values()):
+                self.retry = None   # the set given up came after all
 
     def next_request(self, now, ready):
         """The SyncedSet to request now, or None: while the consumer is not `ready`, a request is
-        outstanding, or nothing new was announced."""
+        outstanding, or nothing new was announced and no request given up waits to be asked again."""
         with self._lock:
             if self.outstanding is not None and now - self.outstanding[1] > self.timeout:
+                _, _, given_up, asked_again = self.outstanding
                 self.outstanding = None
                 self.unanswered += 1
-            if not ready or self.outstanding is not None or self.newest is None:
+                self.retry = None if asked_again else given_up
+            if not ready or self.outstanding is not None:
                 return None
-            requested, self.newest = self.newest, None
-            self.skipped += self.since_request - 1
-            self.since_request = 0
-            self.outstanding = (min(requested.stamps_ns.values()), now)
+            if self.newest is not None:   # a newer set supersedes a retry
+                requested, self.newest, self.retry, again = self.newest, None, None, False
+                self.skipped += self.since_request - 1
+                self.since_request = 0
+            elif self.retry is not None:
+                requested, self.retry, again = self.retry, None, True
+            else:
+                return None
+            self.outstanding = (min(requested.stamps_ns.values()), now, requested, again)
             return requested
