@@ -35,6 +35,7 @@ import heapq
 import itertools
 import threading
 from dataclasses import dataclass
+from typing import NamedTuple
 
 
 @dataclass(frozen=True)
@@ -268,6 +269,20 @@ class PendingSets:
             self._condition.notify_all()
 
 
+class Request(NamedTuple):
+    """A frame request of FrameRequests: the announced SyncedSet asked for, its oldest stamp [ns], when it
+    was asked [s], and whether this is its second asking (after one given up)."""
+    synced: SyncedSet
+    oldest_ns: int
+    asked_at: float
+    again: bool
+
+    @classmethod
+    def of(cls, synced, asked_at, again):
+        """The Request of a SyncedSet asked at `asked_at`."""
+        return cls(synced, min(synced.stamps_ns.values()), asked_at, again)
+
+
 class FrameRequests:
     """Frame sets by request (real time without wasted work): the cameras announce each image's stamp, an
     ApproximateTimeSynchronizer makes sets of the announcements, and when the fitter is ready for another
@@ -286,8 +301,7 @@ class FrameRequests:
         self.timeout = timeout
         self.newest = None            # the newest announced SyncedSet not yet requested
         self.since_request = 0        # sets announced since the last request
-        self.outstanding = None       # (oldest stamp [ns] of the requested set, time of the request [s],
-                                      #  the SyncedSet, whether this is its second asking)
+        self.outstanding = None       # the Request waiting for its frame set
         self.skipped = 0              # announced sets never requested (a newer one was)
         self.unanswered = 0           # requests given up after `timeout`
         self.retry = None             # the SyncedSet of a request given up, to ask once more
@@ -302,7 +316,7 @@ class FrameRequests:
     def received(self, stamp_ns):
         """A frame set of features came, stamped stamp_ns (the newest of its stamps)."""
         with self._lock:
-            if self.outstanding is not None and stamp_ns >= self.outstanding[0]:
+            if self.outstanding is not None and stamp_ns >= self.outstanding.oldest_ns:
                 self.outstanding = None
             if self.retry is not None and stamp_ns >= min(self.retry.stamps_ns.values()):
                 self.retry = None   # the set given up came after all
@@ -311,20 +325,19 @@ class FrameRequests:
         """The SyncedSet to request now, or None: while the consumer is not `ready`, a request is
         outstanding, or nothing new was announced and no request given up waits to be asked again."""
         with self._lock:
-            if self.outstanding is not None and now - self.outstanding[1] > self.timeout:
-                _, _, given_up, asked_again = self.outstanding
+            if self.outstanding is not None and now - self.outstanding.asked_at > self.timeout:
+                self.retry = None if self.outstanding.again else self.outstanding.synced
                 self.outstanding = None
                 self.unanswered += 1
-                self.retry = None if asked_again else given_up
             if not ready or self.outstanding is not None:
                 return None
             if self.newest is not None:   # a newer set supersedes a retry
-                requested, self.newest, self.retry, again = self.newest, None, None, False
+                self.outstanding = Request.of(self.newest, now, again=False)
+                self.newest = self.retry = None
                 self.skipped += self.since_request - 1
                 self.since_request = 0
             elif self.retry is not None:
-                requested, self.retry, again = self.retry, None, True
+                self.outstanding, self.retry = Request.of(self.retry, now, again=True), None
             else:
                 return None
-            self.outstanding = (min(requested.stamps_ns.values()), now, requested, again)
-            return requested
+            return self.outstanding.synced

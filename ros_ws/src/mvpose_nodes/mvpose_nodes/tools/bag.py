@@ -59,11 +59,12 @@ def build_parser(prog):
     info = verbs.add_parser('info', help='summarise a bag', description='Print what a bag holds, like ros2 bag info.')
     info.add_argument('bag', help='bag directory or .mcap file')
 
-    reindex = verbs.add_parser('reindex', help='finish the files of a bag whose recorder was killed',
-                               description='Rewrite every unfinished .mcap file of a bag directory (its recorder '
-                                           'killed before it closed the file) complete, with its summary and '
-                                           'indexes, from the messages of its complete chunks, and metadata.yaml '
-                                           'from the files, as `ros2 bag reindex` does.')
+    reindex = verbs.add_parser('reindex', help='finish the file of a bag whose recorder was killed',
+                               description='Rewrite the .mcap file of a bag directory complete, with its summary '
+                                           'and indexes, from its messages (those of its complete chunks when its '
+                                           'recorder was killed before it closed the file), and metadata.yaml from '
+                                           'it, as `ros2 bag reindex` does. Bags of one .mcap file, as `bag record` '
+                                           'writes them.')
     reindex.add_argument('bag', help='bag directory')
     return parser
 

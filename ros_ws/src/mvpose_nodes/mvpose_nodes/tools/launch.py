@@ -41,8 +41,8 @@ environment plus PYTHONUNBUFFERED=1, and its stdout and stderr merged and printe
 On Ctrl-C or SIGTERM to the launcher, or when a process with on_exit: shutdown ends, the launcher sends
 SIGINT to the processes still running, SIGTERM after --sigint-timeout seconds, SIGKILL after
 --sigterm-timeout more. A process with respawn is started again when it ends, unless the launch is
-stopping, until its respawn_max_retries are used up (`[launch] respawning NAME (restart K of N)`). A negative code in `[launch] NAME exited with code C` means the process was
-ended by signal -C.
+stopping, until its respawn_max_retries are used up (`[launch] respawning NAME in D s (restart K of N)`).
+A negative code in `[launch] NAME exited with code C` means the process was ended by signal -C.
 
 Exit codes:
   0      every process ended with code 0, or SIGTERM to the launcher and all stopped on SIGINT

@@ -45,17 +45,21 @@ def topic_of(index):
     return f'{TOPIC_PREFIX}/m{index}'
 
 
+def transport_qos():
+    """Both directions' QoS: the graph's stream QoS (reliable, volatile, depth TRANSPORT_DEPTH)."""
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+    return QoSProfile(depth=TRANSPORT_DEPTH, reliability=ReliabilityPolicy.RELIABLE)
+
+
 def echo_main(type_names):
     """The echo process: answers every message on topic_of(i) (of type type_names[i]) with its header on
     ACK_TOPIC, until stopped."""
-    import rclpy
-    from rclpy.qos import QoSProfile, ReliabilityPolicy
+    from rclpy.node import Node
     from std_msgs.msg import Header
     from mvpose_nodes.io.interfaces import message_class
     from mvpose_nodes.ros.helpers import run_node
-    from rclpy.node import Node
 
-    qos = QoSProfile(depth=TRANSPORT_DEPTH, reliability=ReliabilityPolicy.RELIABLE)
+    qos = transport_qos()
 
     class Echo(Node):
         def __init__(self):
@@ -85,7 +89,6 @@ def measure(messages, count, stop):
     """TransportResults of [(name, message)] (each with a header, or a std_msgs/Header), `count` round
     trips each, in order; `stop`: helpers.StopSignal (rclpy initialised)."""
     import rclpy
-    from rclpy.qos import QoSProfile, ReliabilityPolicy
     from std_msgs.msg import Header
     from mvpose_nodes.io.interfaces import full_type_name
     from mvpose_nodes.ros.conversions import stamp_ns
@@ -96,7 +99,7 @@ def measure(messages, count, stop):
         return full_type_name(f'{module[0]}/{module[1]}/{type(message).__name__}')
 
     type_names = [type_name(message) for _, message in messages]
-    qos = QoSProfile(depth=TRANSPORT_DEPTH, reliability=ReliabilityPolicy.RELIABLE)
+    qos = transport_qos()
     node = rclpy.create_node('mvpose_transport')
     answers = {}
     node.create_subscription(Header, ACK_TOPIC, lambda header: answers.setdefault(stamp_ns(header), time.perf_counter()), qos)
