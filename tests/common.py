@@ -176,6 +176,48 @@ def wait_for_graph(topics_with_both_ends, timeout=60):
         node.destroy_node()
 
 
+# The graph of launch/mvpose.launch.yaml: its cameras, and what a player gives them (not the ground truth).
+GRAPH_LAUNCH_FILE = 'ros_ws/src/mvpose_nodes/launch/mvpose.launch.yaml'
+GRAPH_CAMERAS = (3, 5, 7)
+GRAPH_INPUTS = [f'/cam{k}/{name}' for k in GRAPH_CAMERAS for name in ('image_raw/compressed', 'camera_info', 'camera_pose')]
+GRAPH_FEATURES = [f'/cam{k}/{name}' for k in GRAPH_CAMERAS for name in ('skin_ellipses', 'labelled_contour')]
+
+
+class SkeletonRecorder:
+    """/mvpose/skeleton as it comes, in this process (make it before starting what publishes, so that it
+    misses none): `received` holds (time.monotonic() of arrival, stamp [ns], status, status_message),
+    `joints` {stamp [ns]: (15, 3) [m]}."""
+
+    def __init__(self, name='skeleton_recorder'):
+        import rclpy
+        from mvpose_msgs.msg import Skeleton
+        from rclpy.qos import DurabilityPolicy, QoSProfile
+        self.node = rclpy.create_node(name)
+        self.received = []
+        self.joints = {}
+        # Deep enough to keep every skeleton while the test is not spinning; transient-local as offered.
+        self.node.create_subscription(Skeleton, '/mvpose/skeleton', self.take,
+                                      QoSProfile(depth=100, durability=DurabilityPolicy.TRANSIENT_LOCAL))
+
+    def take(self, message):
+        stamp = message.header.stamp.sec * 10**9 + message.header.stamp.nanosec
+        self.received.append((time.monotonic(), stamp, message.status, message.status_message))
+        from mvpose_nodes.ros.conversions import joints_from_skeleton
+        self.joints[stamp] = joints_from_skeleton(message)
+
+    def spin_for(self, seconds):
+        spin_for(self.node, seconds)
+
+    def spin_until_count(self, count, timeout):
+        spin_until(self.node, lambda: len(self.received) >= count, timeout, f'{count} skeletons')
+
+    def stamps(self):
+        return [stamp for _, stamp, _, _ in self.received]
+
+    def close(self):
+        self.node.destroy_node()
+
+
 FITTED_KEYPOINTS = ('root', 'neck', 'head', 'left_wrist', 'right_wrist', 'left_elbow', 'right_elbow', 'left_ankle',
                     'right_ankle', 'left_knee', 'right_knee')
 

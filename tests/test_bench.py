@@ -50,8 +50,9 @@ def test_cpu_ticks_and_peak_rss_from_proc_texts():
             '1234 567 0 0 20 0 5 0 100 900000 30000 18446744073709551615')
     assert bench.cpu_ticks(stat) == 1234 + 567
     status = 'Name:\tpython\nVmPeak:\t  900000 kB\nVmHWM:\t  204800 kB\nVmRSS:\t  150000 kB\n'
-    assert bench.peak_rss_kib(status) == 204800
-    assert bench.peak_rss_kib('Name:\tzombie\nState:\tZ (zombie)\n') is None
+    assert bench.status_kib(status) == 204800
+    assert bench.status_kib(status, 'VmRSS') == 150000
+    assert bench.status_kib('Name:\tzombie\nState:\tZ (zombie)\n') is None
 
 
 def test_sample_process_reads_this_process():

@@ -81,3 +81,32 @@ def test_topic_list_shows_types_and_hz_measures(background):
     rates = [float(line.split(':')[1]) for line in hz.splitlines() if line.startswith('average rate:')]
     assert rates and all(rate > 0 for rate in rates), hz
     publisher.interrupt()
+
+
+STUCK_NODE_SCRIPT = '''
+import os, signal, sys, threading, time
+from rclpy.node import Node
+from mvpose_nodes.ros import helpers
+helpers.CLEAN_UP_LIMIT = 1.0
+
+
+class StuckNode(Node):
+    """Stops itself with Ctrl-C, then hangs in its clean-up as rclpy's destroy_node once did."""
+    def __init__(self):
+        super().__init__('stuck_node')
+        threading.Timer(0.5, os.kill, args=(os.getpid(), signal.SIGINT)).start()
+
+    def destroy_node(self):
+        time.sleep(600)
+
+
+sys.exit(helpers.run_node(StuckNode))
+'''
+
+
+def test_a_node_whose_clean_up_hangs_still_exits(tmp_path):
+    """run_node: a stopped node whose clean-up hangs says so and exits (no orphan left behind its launcher)."""
+    script = tmp_path / 'stuck.py'
+    script.write_text(STUCK_NODE_SCRIPT)
+    result = run_mvpose('exec', 'python', script, timeout=30)
+    assert 'StuckNode: clean-up after stopping hung for 1 s in rclpy; exiting without it' in result.stderr

@@ -6,7 +6,8 @@ import re
 import numpy as np
 import pytest
 import yaml
-from common import run_mvpose, wait_for_graph
+from common import (GRAPH_CAMERAS, GRAPH_FEATURES, GRAPH_INPUTS, GRAPH_LAUNCH_FILE, SkeletonRecorder, run_mvpose,
+                    wait_for_graph)
 
 from mvpose_nodes.body.model import JOINT_NAMES
 
@@ -144,6 +145,76 @@ def test_marker_mode_in_the_graph(synth_bag, background, ros_context):
     fused = [d for d in yaml.safe_load_all(out) if d]
     assert len(fused) == 5 and all(len(d['x']) == 15 for d in fused)
     graph.interrupt()
+
+
+@pytest.mark.timeout(240)
+@pytest.mark.parametrize('order', ['graph first, then a plain bag play', 'player first, then the graph'])
+def test_every_frame_set_gets_a_skeleton_whatever_the_start_up_order(order, synth_bag, background, ros_context):
+    """Issue 15: the graph launched and then a plain `bag play` (no --wait-for-subscribers, no --delay), or
+    `bag play --wait-for-subscribers` started first and the graph launched after it: a skeleton for every
+    frame set of the bag, from the first to the last."""
+    bag = synth_bag('--cameras', *GRAPH_CAMERAS, '--frames', '70-74', '--resolution', '960x540')
+    recorder = SkeletonRecorder()
+    try:
+        if order.startswith('graph first'):
+            background('launch', GRAPH_LAUNCH_FILE)
+            wait_for_graph(GRAPH_FEATURES + ['/mvpose/skeleton'])
+            run_mvpose('bag', 'play', bag, '--rate', 0.2, timeout=120)
+        else:
+            player = background('bag', 'play', bag, '--rate', 0.2, '--topics', *GRAPH_INPUTS, '--wait-for-subscribers', 120)
+            background('launch', GRAPH_LAUNCH_FILE)
+            code, _, err = player.finish(timeout=180)
+            assert code == 0 and 'warning' not in err, err
+        recorder.spin_until_count(5, timeout=150)
+        recorder.spin_for(1.0)   # and no more
+        stamps = recorder.stamps()
+    finally:
+        recorder.close()
+    assert stamps == [2_800_000_000 + 40_000_000 * i + 1_230_768_000 * 10**9 for i in range(5)]
+
+
+@pytest.mark.timeout(300)
+def test_the_same_bag_through_a_fresh_graph_gives_the_same_skeletons(synth_bag, background, ros_context):
+    """Issue 15 (repeatable runs): the graph launched twice, each time fed the bag by a plain `bag play` at a
+    rate it keeps up with: the same frame sets get skeletons, the same to 1 mm."""
+    bag = synth_bag('--cameras', *GRAPH_CAMERAS, '--frames', '70-74', '--resolution', '960x540')
+    runs = []
+    for _ in range(2):
+        recorder = SkeletonRecorder()
+        try:
+            graph = background('launch', GRAPH_LAUNCH_FILE)
+            wait_for_graph(GRAPH_FEATURES + ['/mvpose/skeleton'])
+            run_mvpose('bag', 'play', bag, '--rate', 0.2, timeout=120)
+            recorder.spin_until_count(5, timeout=150)
+        finally:
+            recorder.close()
+        code, _, err = graph.interrupt()
+        assert code == 130, err   # the launcher's exit code after Ctrl-C, as ros2 launch's
+        runs.append(recorder.joints)
+    first, second = runs
+    assert sorted(first) == sorted(second) and len(first) == 5
+    for stamp in first:
+        assert np.abs(first[stamp] - second[stamp]).max() < 1e-3, stamp
+
+
+@pytest.mark.timeout(600)
+def test_a_short_soak_reports_memory_latency_and_drops(synth_bag):
+    """Issue 15 (soak, the short form CI runs): 300 frame sets at 960×540, a 10-frame bag looped with its
+    stamps moved on: every one answered (none dropped), each node's memory sampled, no node growing by more
+    than 10 MiB after the warm-up, and the latency not drifting (the last sample within twice the first
+    after the warm-up, plus 50 ms)."""
+    bag = synth_bag('--cameras', *GRAPH_CAMERAS, '--frames', '70-79', '--resolution', '960x540')
+    report = run_mvpose('soak', bag, '--frame-sets', 300, '--sample-every', 50, '--warm-up', 100, timeout=540).stdout
+    assert '(300 frame sets sent' in report, report
+    assert re.search(r'dropped \(no answer in \d+ s\) 0$', report, re.MULTILINE), report
+    rows = re.findall(r'^\s+(\d+)\s+[\d.]+\s+(\d+)\s+((?:[\d.]+\s*){5})$', report, re.MULTILINE)
+    assert [int(answered) for answered, _, _ in rows] == [50, 100, 150, 200, 250, 300], report
+    growth = re.search(r'RSS growth from 100 to 300 frame sets \[MiB\]: (.*)$', report, re.MULTILINE).group(1)
+    for node, value in re.findall(r'(\S+) (-?[\d.]+)', growth):
+        assert float(value) <= 10.0, (node, report)
+    first, last = map(float, re.search(r'latency drift: median of the first sample after warm-up (\d+) ms, of the '
+                                       r'last (\d+) ms', report).groups())
+    assert last <= 2 * first + 50, report
 
 
 def offline_fusion(bag, numbers):

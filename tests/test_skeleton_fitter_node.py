@@ -277,3 +277,63 @@ def test_the_fitter_requests_the_newest_announced_frame_set_one_at_a_time(ros_co
     assert waited > 0.8, 'the second request waits for the first to be answered or given up'
     code, _, err = fitter.interrupt()
     assert code == 0, err
+
+
+ODD_SEGMENT = 8   # frame sets per fault in the test below
+
+
+@pytest.mark.timeout(180)
+def test_the_fitter_stays_sane_under_odd_stamps(rendered_features, background, ros_context):
+    """Issue 15, over DDS: features sent in turn with camera 5 at twice the rate, camera 5 300 ms late,
+    camera 3 stamped back in time once, camera 5 sending every stamp twice, and the clock jumping an hour
+    ahead: the fitter keeps fitting (the frame sets at the end of each fault all get a skeleton, in order, each
+    once) and stops cleanly on Ctrl-C. (The synchroniser's queues under the same faults: test_sync.py.)"""
+    fitter = background('run', 'skeleton_fitter', '--ros-args', '-p', f'cameras:={list(CAMERAS)}',
+                        '-p', 'request_frames:=false')
+    node, received, publishers = feeding_node('odd_stamps_feeder')
+    faults = ['twice the rate', '300 ms late', 'stamps going back', 'duplicated stamps', 'clock jump']
+    late = []   # camera 5's messages held back: (send after this many more frame sets, stamp)
+
+    def send(k, stamp):
+        header = set_stamp(Image().header, stamp, optical_frame(k))
+        for topic, message in zip(FEATURES, feature_messages(rendered_features[k][1], header)):
+            publishers[(k, topic)].publisher.publish(message)
+
+    expected = []   # the stamps that must get a skeleton: each fault's last frame sets
+    try:
+        publish_calibration(node, rendered_features, frame_stamp_ns(60))
+        for publisher in publishers.values():
+            publisher.wait_for_subscribers(timeout=30)
+        frame = 60
+        for fault in faults:
+            for i in range(ODD_SEGMENT):
+                stamp = frame_stamp_ns(frame) + (3600 * 10**9 if fault == 'clock jump' else 0)
+                send(3, stamp - (5 * 40_000_000 if fault == 'stamps going back' and i == 0 else 0))
+                if fault == '300 ms late':
+                    late.append([3, stamp])
+                else:
+                    send(5, stamp)
+                if fault == 'twice the rate':
+                    send(5, stamp + 20_000_000)
+                if fault == 'duplicated stamps':
+                    send(5, stamp)
+                for entry in late:
+                    entry[0] -= 1
+                    if entry[0] < 0:
+                        send(5, entry[1])
+                late[:] = [entry for entry in late if entry[0] >= 0]
+                spin_for(node, 0.1)   # 100 ms per frame set: the fitter keeps up
+                if i >= ODD_SEGMENT - 3 and fault not in ('300 ms late',):
+                    expected.append(stamp)
+                frame += 1
+        for entry in late:
+            send(5, entry[1])
+        spin_until(node, lambda: set(expected) <= {stamp_ns(m.header) for m in received}, 60,
+                   'a skeleton for the last frame sets of each fault')
+    finally:
+        node.destroy_node()
+    stamps = [stamp_ns(m.header) for m in received]
+    assert len(stamps) == len(set(stamps)), 'each frame set once'
+    code, _, err = fitter.interrupt()
+    assert code == 0, err
+    assert 'went back in time' in err

@@ -246,3 +246,62 @@ def test_held_sets_wait_for_their_calibration_in_order_and_none_is_dropped():
     for stamp in range(10, 15):
         held.add(stamp, 3.0)
     assert held.release(3.0, lambda s: False) == [10, 11], 'beyond the limit the oldest go on'
+
+
+NODE_CHANNELS = [(camera, kind) for camera in CAMERAS for kind in ('skin_ellipses', 'labelled_contour')]
+JUMP_NS = 3600 * 10**9   # a clock set forward by an hour
+
+
+def odd_stream(anomaly, frames=100, at=50):
+    """(channel, stamp, message) in arrival order of the skeleton_fitter's 3 cameras × 2 feature topics at
+    25 Hz (±2 ms jitter, each arriving 5 ms after its frame's time), with one camera (or the clock)
+    misbehaving from frame `at`. A message is (channel, frame) for the frames of the bag, (channel, None) for
+    the extra ones."""
+    rng = np.random.default_rng(11)
+    sent = []   # (arrival, stamp, channel, frame)
+    for frame in range(frames):
+        stamp = frame * PERIOD_NS + (JUMP_NS if anomaly == 'clock jump' and frame >= at else 0)
+        for camera in CAMERAS:
+            camera_stamp = stamp + int(rng.integers(-2 * MS, 2 * MS + 1))
+            late = 300 * MS if anomaly == '300 ms late' and camera == 'cam5' and frame >= at else 5 * MS
+            copies = [(stamp + late, camera_stamp, frame)]
+            if frame >= at and camera == 'cam7' and anomaly == 'twice the rate':
+                copies.append((stamp + PERIOD_NS // 2 + late, camera_stamp + PERIOD_NS // 2, None))
+            if frame >= at and camera == 'cam5' and anomaly == 'duplicated stamps':
+                copies.append((stamp + late, camera_stamp, None))
+            if frame == at and camera == 'cam3' and anomaly == 'stamps going back':
+                copies = [(stamp + late, camera_stamp - 5 * PERIOD_NS, None)]
+            sent += [(arrival, s, channel, copy_frame) for arrival, s, copy_frame in copies
+                     for channel in NODE_CHANNELS if channel[0] == camera]
+    sent.sort(key=lambda entry: entry[0])
+    return [(channel, stamp, (channel, frame)) for _, stamp, channel, frame in sent]
+
+
+@pytest.mark.parametrize('anomaly', ['twice the rate', '300 ms late', 'stamps going back', 'duplicated stamps',
+                                     'clock jump'])
+def test_a_misbehaving_camera_or_clock_leaves_the_synchroniser_sane(anomaly):
+    """Issue 15: the skeleton_fitter's synchroniser (as MultiCameraNode configures it) fed one camera at twice
+    the rate, one 300 ms late, one whose stamps go back, one sending every stamp twice, or every stamp jumping
+    an hour: its queues never hold more than queue_size per topic, no set mixes frames or crosses another,
+    and every frame from shortly after the fault on gets a set of all three cameras."""
+    queue_size, at, frames = 10, 50, 100
+    sync = ApproximateTimeSynchronizer(NODE_CHANNELS, queue_size=queue_size, max_interval_ns=20 * MS,
+                                       groups={channel: channel[0] for channel in NODE_CHANNELS},
+                                       timeout_ns=10**9, reorder_window_ns=0, restart_ns=0)
+    sets = []
+    for channel, stamp, message in odd_stream(anomaly, frames, at):
+        sets += sync.add(channel, stamp, message)
+        assert max(len(queue) for queue in sync._queues.values()) <= queue_size   # white box: memory held
+    sets += sync.flush()
+    if anomaly == 'stamps going back':   # started afresh there (a bag played again looks the same)
+        assert sync.restarts == 1
+    else:
+        assert_ros_guarantees(sets, 20 * MS)
+    full = {}
+    for synced in sets:
+        frames_in_set = {frame for _, frame in synced.messages.values() if frame is not None}
+        assert len(frames_in_set) <= 1, f'set mixes frames {frames_in_set}'
+        if frames_in_set and not synced.missing_groups:
+            full[frames_in_set.pop()] = synced
+    settled = set(range(at - 1)) | set(range(at + 3, frames))   # the fault's own frames may go
+    assert settled <= full.keys(), sorted(settled - full.keys())

@@ -30,6 +30,12 @@ goes, stage by stage, comes from the nodes' own /diagnostics (ros/diagnostics.py
 end of the run. In open loop, the fitted frame sets' mean joint error against the bag's
 /mvpose/ground_truth.
 
+`./mvpose soak [BAG] [--frame-sets N]`: the same closed loop for N frame sets, the bag's frame sets sent
+again and again with their stamps moved on by the bag's length each time (so that to the graph they are
+one long recording): each node's resident memory and the latency sampled every --sample-every frame sets,
+and every frame set not fitted counted (a soak finds leaks, a latency that drifts and drops that are not
+on purpose).
+
 --transport: the graph does not run. The first camera's first image with a person in the bag, its
 camera_features messages (silhouette raw and PNG, labelled contour, skin ellipses) and a bare Header are
 sent to an echo process one at a time (tools/transport.py): size, serialisation CPU and round trip per
@@ -43,8 +49,8 @@ from pathlib import Path
 
 import numpy as np
 
-from mvpose_nodes.app.reports.benchmark import (STALL_TIMEOUT, BenchResult, cpu_split, format_table, node_usage,
-                                                sample_process)
+from mvpose_nodes.app.reports.benchmark import (STALL_TIMEOUT, BenchResult, SoakSample, cpu_split, format_soak,
+                                                format_table, median_p95, node_usage, resident_mib, sample_process)
 from mvpose_nodes.tools.cli import ArgumentParser, UserError, exit_on_user_error
 
 DEFAULT_BAG = Path('bags/i3dpost_walk_synth')
@@ -55,6 +61,9 @@ SUBSCRIBER_TIMEOUT = 30.0           # [s] for the graph to subscribe to the benc
 DIAGNOSTICS_TIMEOUT = 5.0           # [s] for every node's /diagnostics (published each second)
 DRAIN_TIMEOUT = 10.0                # [s] open loop: skeletons still awaited after the last frame set sent
 IMAGE_DEPTH = 10
+SOAK_FRAME_SETS = 10_000
+SOAK_SAMPLE_EVERY = 500
+SOAK_WARM_UP = 500                  # frame sets before memory growth is counted (start-up, caches)
 
 
 # ---------------------------------------------------------------- the run
@@ -85,6 +94,44 @@ def load_frame_sets(bag, cameras, limit=None):
     return calibration, frame_sets[:limit]
 
 
+class LoopedFrameSets:
+    """`total` frame sets made of a bag's [(stamp, {camera: CompressedImage CDR})], played again and
+    again: the k-th time round, every stamp is moved on by k × (the bag's length + one frame period), in the
+    images' headers too, so that the stamps keep increasing as in one long recording. Indexable like the
+    list (the current round's images are re-serialised once)."""
+
+    def __init__(self, frame_sets, total):
+        self.frame_sets, self.total = frame_sets, total
+        stamps = [stamp for stamp, _ in frame_sets]
+        period = (stamps[-1] - stamps[0]) // max(1, len(stamps) - 1) if len(stamps) > 1 else 40_000_000
+        self.round_ns = stamps[-1] - stamps[0] + period
+        self._round, self._views = 0, [views for _, views in frame_sets]
+
+    def __len__(self):
+        return self.total
+
+    def __getitem__(self, index):
+        if not 0 <= index < self.total:
+            raise IndexError(index)
+        round_number, position = divmod(index, len(self.frame_sets))
+        if round_number != self._round:
+            self._round, self._views = round_number, [self._moved(views, round_number * self.round_ns)
+                                                      for _, views in self.frame_sets]
+        return self.frame_sets[position][0] + round_number * self.round_ns, self._views[position]
+
+    @staticmethod
+    def _moved(views, offset_ns):
+        from rclpy.serialization import deserialize_message, serialize_message
+        from sensor_msgs.msg import CompressedImage
+        from mvpose_nodes.ros.conversions import set_stamp, stamp_ns
+        moved = {}
+        for camera, data in views.items():
+            image = deserialize_message(data, CompressedImage)
+            set_stamp(image.header, stamp_ns(image.header) + offset_ns, image.header.frame_id)
+            moved[camera] = serialize_message(image)
+        return moved
+
+
 def decode_times(frame_sets):
     """Milliseconds of cv2.imdecode for every image of the frame sets, in this process."""
     import cv2
@@ -103,7 +150,9 @@ def decode_times(frame_sets):
     return times, shape
 
 
-def run_bench(bag, window, rate, limit, log_path):
+def run_bench(bag, window, rate, limit, log_path, total=None, sample_every=None):
+    """The bench run (the module's docstring); with `total`, that many frame sets (LoopedFrameSets), and
+    with `sample_every`, a SoakSample in result.samples each time that many more frame sets are answered."""
     import rclpy
     from diagnostic_msgs.msg import DiagnosticArray
     from rclpy.qos import QoSProfile, ReliabilityPolicy
@@ -131,6 +180,8 @@ def run_bench(bag, window, rate, limit, log_path):
     print(f'[bench] decoding the {len(frame_sets) * len(cameras)} images of {len(frame_sets)} frame sets here '
           'for the decode-only floor', file=sys.stderr, flush=True)
     decode_ms, shape = decode_times(frame_sets)
+    if total is not None:
+        frame_sets = LoopedFrameSets(frame_sets, total)
     result = BenchResult(str(bag), cameras, shape[1], shape[0], window, len(frame_sets), rate, decode_ms=decode_ms)
     ticks = os.sysconf('SC_CLK_TCK')
     log_path = Path(log_path)
@@ -192,7 +243,7 @@ def run_bench(bag, window, rate, limit, log_path):
             pids = launch.pids()
             pids['bench (this process)'] = os.getpid()
             print(f'[bench] starting the graph (log: {log_path})', file=sys.stderr, flush=True)
-            wait_for_connections(node, launch, stop)
+            wait_for_connections(node, launch, stop, log_path)
             result.connected = time.monotonic()
             wait_for_subscribers(node, {**{f'/cam{k}/image_raw/compressed': p for k, p in image_publishers.items()},
                                         **calibration_publishers}, SUBSCRIBER_TIMEOUT, stop)
@@ -203,7 +254,7 @@ def run_bench(bag, window, rate, limit, log_path):
             before = {name: sample_process(pid) for name, pid in pids.items()}
             started = time.monotonic()
             progress = Progress(len(frame_sets), 'bench', unit='frame sets')
-            next_index, outstanding = 0, []
+            next_index, outstanding, finished = 0, [], []   # finished: stamps answered, in that order
             first_stamp = frame_sets[0][0]
             while not stop.stopped and (next_index < len(frame_sets) or outstanding):
                 now = time.monotonic()
@@ -238,6 +289,9 @@ def run_bench(bag, window, rate, limit, log_path):
                     if stamp in answered:
                         outstanding.remove(stamp)
                         progress.update()
+                        finished.append(stamp)
+                        if sample_every and len(finished) % sample_every == 0:
+                            result.samples.append(soak_sample(result, finished, sample_every, pids, started))
                 if launch.wait(timeout=0) is not None:
                     raise UserError(f'a node of the graph stopped (exit code {launch.exit_code}); see {log_path}')
             progress.close()
@@ -256,6 +310,14 @@ def run_bench(bag, window, rate, limit, log_path):
     if stop.stopped:
         raise KeyboardInterrupt
     return result
+
+
+def soak_sample(result, finished, period, pids, started):
+    """A SoakSample now: the nodes' RSS, and the median latency of the last `period` of the `finished`
+    frame sets (stamps, in the order they were answered)."""
+    latencies = [1e3 * (result.skeletons[s][0] - result.sent[s]) for s in finished[-period:] if s in result.skeletons]
+    return SoakSample(len(finished), time.monotonic() - started,
+                      {name: resident_mib(pid) for name, pid in pids.items()}, median_p95(latencies)[0])
 
 
 def camera_messages(bag, camera):
@@ -334,6 +396,33 @@ def main(argv=None, prog='bench'):
         print(format_table(result), flush=True)
     # Closed loop every frame set must be fitted; open loop, skipping is the point and the table says how much.
     return 0 if args.rate is not None or len(result.skeletons) == result.frame_sets else 1
+
+
+def soak_main(argv=None, prog='soak'):
+    parser = ArgumentParser(prog=prog, description='Loop a bag through the graph for a long run (see `bench --help`): '
+                                                   "each node's memory and the latency over time, and every frame "
+                                                   'set not fitted.')
+    parser.add_argument('bag', nargs='?', type=Path, help=f'camera bag with cameras 3, 5, 7 (default {DEFAULT_BAG})')
+    parser.add_argument('--frame-sets', type=int, default=SOAK_FRAME_SETS, metavar='N',
+                        help=f'frame sets to send, the bag looped (default {SOAK_FRAME_SETS})')
+    parser.add_argument('--sample-every', type=int, default=SOAK_SAMPLE_EVERY, metavar='N',
+                        help=f'frame sets between two samples of memory and latency (default {SOAK_SAMPLE_EVERY})')
+    parser.add_argument('--warm-up', type=int, default=SOAK_WARM_UP, metavar='N',
+                        help=f'frame sets before memory growth is counted (default {SOAK_WARM_UP})')
+    args = parser.parse_args(sys.argv[1:] if argv is None else argv)
+    with exit_on_user_error(prog):
+        if min(args.frame_sets, args.sample_every) < 1 or args.warm_up < 0:
+            raise UserError('--frame-sets and --sample-every must be at least 1, --warm-up not negative')
+        from mvpose_nodes.app.main import repository_root
+        root = repository_root()
+        bag = args.bag or root / DEFAULT_BAG
+        if not bag.exists():
+            raise UserError(f"bag '{bag}' not found" + ('' if args.bag else f': run {MAKE_DEFAULT_BAG}'))
+        result = run_bench(bag, DEFAULT_WINDOW, None, None, root / 'output' / 'soak' / 'graph.log',
+                           total=args.frame_sets, sample_every=args.sample_every)
+        print(format_soak(result, args.warm_up), flush=True)
+    # Passed over and skipped frame sets are the fitter keeping to the newest (on purpose); dropped ones are lost.
+    return 0 if result.dropped == 0 and len(result.sent) == result.frame_sets else 1
 
 
 if __name__ == '__main__':

@@ -71,7 +71,11 @@ def demo(bag, output, rate):
     pictures = evaluate_and_draw(bag, run, output, GRAPH_CAMERAS)
     tool(['export', str(recorded), '--format', 'bvh', '-o', str(output / 'fitted.bvh')])
     summary(bag, run, pictures, output, time.monotonic() - started)
-    return 0 if len(run.fitted) == run.frame_sets else 1
+    if len(run.fitted) < run.frame_sets:
+        print(f'[demo] FAILED: {run.frame_sets - len(run.fitted)} of the {run.frame_sets} frame sets got no fitted '
+              f"skeleton (missing, or STATUS_LOST); the nodes' log: {run.log}", file=sys.stderr, flush=True)
+        return 1
+    return 0
 
 
 def live_line(message, run):

@@ -57,7 +57,7 @@ def make_extractor(params_path, skin_model_path):
 def evaluate(args, extractor):
     from scipy import ndimage
     from mvpose_nodes.body.model import JOINT_NAMES, LABEL_LEFT_ARM, LABEL_RIGHT_ARM
-    from mvpose_nodes.ros.camera_bag import frame_sets
+    from mvpose_nodes.ros.camera_bag import cameras_in, frame_sets
     from mvpose_nodes.tools.cli import UserError
     from mvpose_nodes.vision.features import KEYPOINT_NAMES, contour_label_agreement
     from mvpose_nodes.app.progress import Progress
@@ -70,6 +70,7 @@ def evaluate(args, extractor):
     matched = {name: [] for name in KEYPOINT_NAMES}  # error after matching left/right pairs to the truth
     swaps = {name: 0 for name in KEYPOINT_NAMES}
     images = 0
+    cameras_in(args.bag, args.cameras)
     progress = Progress(count_images(args.bag, args.cameras), 'eval', unit='images')
     for frame_set in frame_sets(args.bag, args.cameras):
         if frame_set.truth is None or not frame_set.labels:
@@ -170,7 +171,8 @@ def report(bag, images, no_person, ious, skin_counts, errors, offsets, matched, 
 
 def benchmark(args, extractor):
     import cv2
-    from mvpose_nodes.ros.camera_bag import frame_sets
+    from mvpose_nodes.ros.camera_bag import cameras_in, frame_sets
+    cameras_in(args.bag, args.cameras)
     decode, stages, totals = [], {}, []
     for frame_set in frame_sets(args.bag, args.cameras):
         for rgb in frame_set.images.values():

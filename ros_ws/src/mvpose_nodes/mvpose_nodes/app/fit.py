@@ -39,12 +39,13 @@ def fit_bag(args):
     from rclpy.serialization import serialize_message
     from mvpose_nodes.io.bagfile import BagWriter
     from mvpose_nodes.body.model import PARAMETER_NAMES
-    from mvpose_nodes.ros.camera_bag import GROUND_TRUTH_TOPIC, SKELETON_TOPIC, STREAM_QOS, frame_sets
+    from mvpose_nodes.ros.camera_bag import GROUND_TRUTH_TOPIC, SKELETON_TOPIC, STREAM_QOS, cameras_in, frame_sets
     from mvpose_nodes.app.features import count_images, make_extractor
     from mvpose_nodes.fitting.fitter import SkeletonFitter, view_from_features
     from mvpose_nodes.app.progress import Progress
     from mvpose_nodes.ros.conversions import skeleton_message, stage_messages
 
+    cameras_in(args.bag, args.cameras)
     extractors = {k: make_extractor(None, None) for k in args.cameras}
     fitter = SkeletonFitter()
     progress = Progress(count_images(args.bag, args.cameras) // len(args.cameras), 'fit')
@@ -101,12 +102,18 @@ def eval_main(argv=None, prog='eval'):
         from mvpose_nodes.app.suite import main
         return main(argv[1:], prog=f'{prog} suite')
     parser = build_parser(prog)
-    parser.add_argument('--truth', type=Path, help='bag with /mvpose/ground_truth (default: the recorded bag)')
+    compared = parser.add_mutually_exclusive_group()
+    compared.add_argument('--truth', type=Path, help='bag with /mvpose/ground_truth (default: the recorded bag)')
+    compared.add_argument('--against', type=Path, metavar='OTHER_RUN',
+                          help="another recorded run's bag: how far its /mvpose/skeleton is from this one's, "
+                               'frame set by frame set (is the graph repeatable?)')
     parser.epilog = '`eval suite --help`: the fitter over randomised studio cases instead of one bag.'
     args = parser.parse_args(argv)
     with exit_on_user_error(prog):
         from mvpose_nodes.app.reports.accuracy import print_table_2
         from mvpose_nodes.ros.camera_bag import GROUND_TRUTH_TOPIC, SKELETON_TOPIC
+        if args.against:
+            return print_run_difference(args.bag, args.against)
         fitted = skeletons(args.bag, SKELETON_TOPIC)
         truth = skeletons(args.truth or args.bag, GROUND_TRUTH_TOPIC)
         stamps = sorted(set(fitted) & set(truth))
@@ -114,6 +121,23 @@ def eval_main(argv=None, prog='eval'):
             raise UserError(f"no stamp has both a fitted skeleton ({args.bag}) and a ground truth "
                             f"({args.truth or args.bag})")
         print_table_2(np.array([fitted[s] for s in stamps]), np.array([truth[s] for s in stamps]), args.bag)
+    return 0
+
+
+def print_run_difference(run, other):
+    """Print how far two recorded runs' /mvpose/skeleton are apart: the largest joint distance [mm] over
+    the frame sets both have, and the frame sets only one of them has."""
+    from mvpose_nodes.ros.camera_bag import SKELETON_TOPIC
+    mine, theirs = skeletons(run, SKELETON_TOPIC), skeletons(other, SKELETON_TOPIC)
+    common = sorted(set(mine) & set(theirs))
+    if not common:
+        raise UserError(f"'{run}' and '{other}' have no frame set (stamp) in common")
+    distances = np.array([np.linalg.norm(mine[s] - theirs[s], axis=1).max() for s in common]) * 1e3
+    worst = common[int(np.argmax(distances))]
+    print(f'eval: {run} against {other}: {len(common)} frame sets in both, {len(set(mine) - set(theirs))} only in '
+          f'the first, {len(set(theirs) - set(mine))} only in the second')
+    print(f'  largest joint distance: {distances.max():.3f} mm (stamp {worst} ns); mean of the per-frame-set '
+          f'largest {distances.mean():.3f} mm; frame sets over 1 mm: {int((distances > 1.0).sum())}')
     return 0
 
 

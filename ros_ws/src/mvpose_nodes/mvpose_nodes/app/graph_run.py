@@ -47,16 +47,14 @@ def run_graph(bag, log_path, rate=1.0, on_skeleton=None):
     import rclpy
     from mvpose_msgs.msg import Skeleton
     from mvpose_nodes.io.bagfile import BagReader
-    from mvpose_nodes.ros.camera_bag import GROUND_TRUTH_TOPIC, SKELETON_TOPIC
+    from mvpose_nodes.ros.camera_bag import GROUND_TRUTH_TOPIC, SKELETON_TOPIC, cameras_in
     from mvpose_nodes.tools.launch import Launch, load_launch_file
     from mvpose_nodes.ros.conversions import stamp_ns
     from mvpose_nodes.ros.helpers import LATCHED, StopSignal
+    cameras_in(bag, GRAPH_CAMERAS)
 
     reader = BagReader(bag)
     images = [f'/cam{k}/image_raw/compressed' for k in GRAPH_CAMERAS]
-    missing = [topic for topic in images if topic not in reader.topics]
-    if missing:
-        raise UserError(f"bag '{bag}' lacks {', '.join(missing)} (the graph fits cameras {list(GRAPH_CAMERAS)})")
     played = images + [f'/cam{k}/{kind}' for k in GRAPH_CAMERAS for kind in ('camera_info', 'camera_pose')]
     if GROUND_TRUTH_TOPIC in reader.topics:
         played.append(GROUND_TRUTH_TOPIC)
@@ -80,7 +78,7 @@ def run_graph(bag, log_path, rate=1.0, on_skeleton=None):
                                  lambda message: run.truth.__setitem__(stamp_ns(message.header), message), 100)
         try:
             launch.start()
-            wait_for_connections(node, launch, stop)
+            wait_for_connections(node, launch, stop, run.log)
             player = subprocess.Popen([sys.executable, '-m', 'mvpose_nodes.app.main', 'bag', 'play', str(bag),
                                        '--topics', *played, '--wait-for-subscribers', '--delay', '1.0', '--rate', str(rate)],
                                       stdout=log, stderr=subprocess.STDOUT)
@@ -109,9 +107,10 @@ def run_graph(bag, log_path, rate=1.0, on_skeleton=None):
     return run
 
 
-def wait_for_connections(node, launch, stop):
+def wait_for_connections(node, launch, stop, log):
     """Until every camera's feature topics and /mvpose/skeleton have their publishers and subscribers
-    (the player waits for its own subscribers only, not for the nodes downstream of them)."""
+    (the player waits for its own subscribers only, not for the nodes downstream of them); UserError
+    naming `log` (the nodes' log) when a node stops or the graph does not connect."""
     import rclpy
     topics = [f'/cam{k}/{name}' for k in GRAPH_CAMERAS for name in FEATURE_TOPICS]
     deadline = time.monotonic() + CONNECT_TIMEOUT
@@ -121,9 +120,9 @@ def wait_for_connections(node, launch, stop):
             time.sleep(1.0)  # discovery is done; give the endpoints a moment to match
             return
         if launch.wait(timeout=0) is not None:
-            raise UserError(f'a node of the graph stopped while starting (exit code {launch.exit_code})')
+            raise UserError(f'a node of the graph stopped while starting (exit code {launch.exit_code}); see {log}')
         if time.monotonic() > deadline:
-            raise UserError(f'the graph did not connect within {CONNECT_TIMEOUT:.0f} s')
+            raise UserError(f'the graph did not connect within {CONNECT_TIMEOUT:.0f} s; see {log}')
         rclpy.spin_once(node, timeout_sec=0.1)
 
 

@@ -34,6 +34,7 @@ ROUTED_TOOLS = {
     'markers': ('mvpose_nodes.app.markers', 'marker mode (paper 001): tracking evaluated against a synthetic marker bag'),
     'export': ('mvpose_nodes.app.export', 'fitted motion of a recorded bag as CSV, JSON or BVH'),
     'bench': ('mvpose_nodes.app.bench', 'end-to-end throughput and latency of the graph over DDS'),
+    'soak': ('mvpose_nodes.app.bench', 'loop a bag through the graph: memory, latency drift and drops over a long run'),
 }
 
 

@@ -41,11 +41,12 @@ def markers_main(argv=None, prog='markers'):
 
 def evaluate_bag(bag, cameras=None, pictures=None):
     from mvpose_nodes.body.model import JOINT_NAMES
-    from mvpose_nodes.ros.camera_bag import frame_sets
+    from mvpose_nodes.ros.camera_bag import cameras_in, frame_sets
     from mvpose_nodes.markers.views import ViewTrackers
     from mvpose_nodes.markers.tracking import MarkerTracker, NearestNeighbourTracker
     from mvpose_nodes.app.progress import Progress
 
+    cameras_in(bag, cameras)
     sets = [s for s in frame_sets(bag, cameras) if s.markers]
     if not sets:
         raise UserError(f"bag '{bag}' has no ground-truth markers (/cam<K>/ground_truth/markers): "

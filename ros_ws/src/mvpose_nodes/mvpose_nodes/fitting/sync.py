@@ -14,7 +14,9 @@ rclpy. Guarantees, as in ROS:
 * the output depends only on the stamps, not on the arrival order: messages are held until the newest stamp
   received is `reorder_window_ns` past theirs and then matched in stamp order, so any arrival order in which
   every message arrives within that window (and the queues do not overflow) gives the same sets;
-* a set whose spread exceeds `max_interval_ns` is never published (its oldest message is dropped instead).
+* a set whose spread exceeds `max_interval_ns` is never published (its oldest message is dropped instead);
+* a channel holds one message per stamp: a second one of the same stamp (a message sent twice) is dropped, so
+  that it cannot make a set of its own after the first was used.
 
 Beyond ROS: channels form groups (a camera's feature topics). A group whose newest stamp is more than
 `timeout_ns` behind the input clock is silent; sets then form from the other groups ("degraded" sets, which
@@ -136,7 +138,10 @@ class ApproximateTimeSynchronizer:
         group = self.groups[channel]
         self._group_heard_ns[group] = max(self._group_heard_ns.get(group, stamp_ns), stamp_ns)
         queue = self._queues[channel]
-        bisect.insort(queue, (stamp_ns, message), key=lambda entry: entry[0])
+        position = bisect.bisect_left(queue, stamp_ns, key=lambda entry: entry[0])
+        if position < len(queue) and queue[position][0] == stamp_ns:
+            return  # a second message of a stamp this channel has: the first is kept (one per stamp and channel)
+        queue.insert(position, (stamp_ns, message))
         if len(queue) > self.queue_size:
             del queue[0]
 

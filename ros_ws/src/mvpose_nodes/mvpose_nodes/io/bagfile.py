@@ -259,6 +259,27 @@ class BagReader:
     def duration_ns(self):
         return self.end_ns - self.start_ns
 
+    def metadata_disagreements(self):
+        """Where metadata.yaml says other than the MCAP files (which the reader follows): ['<topic>: ...'],
+        empty when they agree, when there is no metadata.yaml, or for an unfinished bag (whose metadata is
+        behind its messages by design)."""
+        if not self.metadata or self.unfinished:
+            return []
+        listed = {}
+        for entry in self.metadata.get('topics_with_message_count') or []:
+            try:
+                listed[entry['topic_metadata']['name']] = (entry['topic_metadata']['type'], entry['message_count'])
+            except (KeyError, TypeError):
+                return [f'{METADATA_FILE} has a malformed topics_with_message_count entry']
+        found = {name: (topic.type, topic.message_count) for name, topic in self.topics.items()}
+        problems = [f'{name}: listed, not in the MCAP' for name in sorted(listed.keys() - found.keys())]
+        problems += [f'{name}: in the MCAP, not listed' for name in sorted(found.keys() - listed.keys())]
+        problems += [f'{name}: {listed[name][0]} × {listed[name][1]} listed, {found[name][0]} × {found[name][1]} in the MCAP'
+                     for name in sorted(listed.keys() & found.keys()) if listed[name] != found[name]]
+        if self.metadata.get('message_count') not in (None, self.message_count):
+            problems.append(f"message_count {self.metadata['message_count']} listed, {self.message_count} in the MCAP")
+        return problems
+
     def _find_files(self):
         if not self.path.exists():
             raise BagError(f"bag '{self.path}': no such file or directory")

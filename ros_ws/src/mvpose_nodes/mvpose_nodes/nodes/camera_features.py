@@ -64,7 +64,8 @@ class CameraFeaturesNode(ReportOnce, Node):
         self.create_subscription(Header, 'frame_request', self.on_request, STREAM_DEPTH)
         self.held = collections.OrderedDict()   # stamp [ns] -> (image message, its topic), oldest first
         self.clock = StageClock()   # CPU per stage: decode, features, conversion, publish
-        self.counts = {'images': 0, 'images with a person': 0, 'images rejected': 0, 'images not requested': 0}
+        self.counts = {'images': 0, 'images with a person': 0, 'images rejected': 0, 'images not requested': 0,
+                       'features nobody subscribed to': 0}
         self.last_problem = ''
         self.diagnostics = NodeDiagnostics(self, self.state, [self.clock])
         self.get_logger().info(f'camera {self.camera}: {self.values["silhouette_method"]} silhouettes, '
@@ -129,7 +130,11 @@ class CameraFeaturesNode(ReportOnce, Node):
                 rgb = colour_image(message)
         except ImageError as error:
             return self.reject(message.header, *error.size, f'{error.kind}: {topic}', f'{topic}: {error}')
-        self.process(rgb, message.header, topic)
+        try:
+            self.process(rgb, message.header, topic)
+        except Exception as error:   # a bug must not stop the camera: say it, answer with a status, go on
+            self.reject(message.header, rgb.shape[1], rgb.shape[0], f'failure: {topic}',
+                        f'{topic}: features failed ({type(error).__name__}: {error})')
 
     def reject(self, header, width, height, cause, reason):
         self.counts['images rejected'] += 1
@@ -176,6 +181,9 @@ class CameraFeaturesNode(ReportOnce, Node):
         with self.clock('conversion'):
             mask = silhouette.astype(np.uint8) * 255 if wanted else None
             silhouettes = [(publisher, make(mask, header)) for publisher, make in wanted]
+        if not (wanted or self.ellipses_publisher.get_subscription_count()
+                or self.contour_publisher.get_subscription_count()):
+            self.counts['features nobody subscribed to'] += 1   # lost, but not silently: on /diagnostics
         with self.clock('publish'):
             for publisher, message in silhouettes:
                 publisher.publish(message)
@@ -190,6 +198,8 @@ class CameraFeaturesNode(ReportOnce, Node):
         message = f"{counts['images']} images, {counts['images with a person']} with a person"
         if counts['images not requested']:
             message += f", {counts['images not requested']} not requested by the fitter (skipped)"
+        if counts['features nobody subscribed to']:
+            message += f", the features of {counts['features nobody subscribed to']} published with no subscriber"
         if counts['images rejected']:
             return 'warn', f"{message}, {counts['images rejected']} rejected (last: {self.last_problem})", counts
         return 'ok', message, counts

@@ -81,10 +81,15 @@ class SkeletonFitterNode(MultiCameraNode):
             worker.start()
         self.get_logger().info(f'fitting cameras {self.cameras}')
 
-    def on_frame_set(self, frame_set):
-        self.pending.put(frame_set)
+    def synchronised(self, frame_set):
+        # The request is answered when its features are in, even while the set waits for a camera's
+        # calibration: the cameras go on computing the next sets meanwhile, and none is lost to a request
+        # given up.
         if self.requests is not None:
             self.requests.received(frame_set.stamp_ns)
+
+    def on_frame_set(self, frame_set):
+        self.pending.put(frame_set)
 
     def on_announcement(self, camera, header):
         with self.clock('sync'):

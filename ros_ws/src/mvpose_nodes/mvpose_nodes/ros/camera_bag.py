@@ -118,6 +118,22 @@ class FrameSet:
         return self.skeletons.get(MARKER_CENTRES_TOPIC)
 
 
+def cameras_in(bag_path, wanted=None):
+    """The numbers of the cameras whose images a bag holds (/cam<K>/image_raw or image_raw/compressed),
+    sorted. BagError (one line) when it holds none, or when `wanted` (e.g. a command's --cameras) names one
+    it lacks."""
+    from mvpose_nodes.io.bagfile import BagError, BagReader
+    present = sorted({int(m['camera']) for name in BagReader(bag_path).topics
+                      if (m := CAMERA_TOPIC.match(name)) and m['kind'].startswith('image_raw')})
+    if not present:
+        raise BagError(f"bag '{bag_path}' has no camera images (no /cam<K>/image_raw or /cam<K>/image_raw/compressed)")
+    missing = sorted(set(wanted or ()) - set(present))
+    if missing:
+        raise BagError(f"--cameras: bag '{bag_path}' has no images of camera {', '.join(map(str, missing))} "
+                       f"(it has cameras {' '.join(map(str, present))})")
+    return present
+
+
 def frame_sets(bag_path, cameras=None):
     """Yield the FrameSets of a bag of this contract in stamp order (cameras: numbers to keep, None = all)."""
     from rclpy.serialization import deserialize_message

@@ -14,6 +14,7 @@ from std_msgs.msg import Header
 
 from mvpose_nodes.body.model import JOINT_NAMES, joint_orientations
 from mvpose_nodes.body.camera import Camera
+from mvpose_nodes.vision.features import MAX_IMAGE_PIXELS, MIN_IMAGE_SIDE
 
 WORLD_FRAME = 'world'
 
@@ -101,6 +102,8 @@ def png_mono(mask, header, compression=None):
 def image_from_compressed(message):
     """RGB uint8 (H, W, 3), or mono8 (H, W) for a mono8 image, of a CompressedImage; ValueError if undecodable."""
     mono = message.format.startswith('mono8')
+    if not len(message.data):
+        raise ValueError(f"CompressedImage has no data (format '{message.format}')")
     decoded = cv2.imdecode(np.frombuffer(bytes(message.data), np.uint8),
                            cv2.IMREAD_GRAYSCALE if mono else cv2.IMREAD_COLOR)
     if decoded is None:
@@ -121,7 +124,7 @@ def image_from_raw(message):
 
 
 class ImageError(ValueError):
-    """An image message that gives no colour image: `kind` ('undecodable', 'mono' or 'encoding') and
+    """An image message that gives no colour image: `kind` ('undecodable', 'mono', 'encoding' or 'size') and
     `size` (width, height) [px] as far as known ((0, 0) when nothing decoded)."""
 
     def __init__(self, text, kind, size=(0, 0)):
@@ -129,20 +132,52 @@ class ImageError(ValueError):
         self.kind, self.size = kind, tuple(size)
 
 
+def encoded_size(data):
+    """(width, height) [px] read from the header of PNG or JPEG bytes (PNG's IHDR; JPEG's start-of-frame
+    segment, ITU-T T.81 B.2.2), or None when the header does not say: lets an image too large to take be
+    refused before decoding it (an 8000×8000 JPEG of 1 MB decodes to 192 MB in about half a second)."""
+    if data[:8] == b'\x89PNG\r\n\x1a\n' and len(data) >= 24:
+        return int.from_bytes(data[16:20], 'big'), int.from_bytes(data[20:24], 'big')
+    if data[:2] != b'\xff\xd8':
+        return None
+    at = 2
+    while at + 9 <= len(data) and data[at] == 0xFF:
+        marker = data[at + 1]
+        if 0xC0 <= marker <= 0xCF and marker not in (0xC4, 0xC8, 0xCC):   # SOFn, not DHT, JPG, DAC
+            return int.from_bytes(data[at + 7:at + 9], 'big'), int.from_bytes(data[at + 5:at + 7], 'big')
+        at += 2 if marker == 0xFF or 0xD0 <= marker <= 0xD7 else 2 + int.from_bytes(data[at + 2:at + 4], 'big')
+    return None
+
+
+def check_image_size(width, height):
+    """ImageError unless a (width, height) [px] image is one the features take (vision.features:
+    MIN_IMAGE_SIDE, MAX_IMAGE_PIXELS)."""
+    if min(width, height) < MIN_IMAGE_SIDE or width * height > MAX_IMAGE_PIXELS:
+        raise ImageError(f'image is {width}×{height}: the features take {MIN_IMAGE_SIDE} px a side or more and '
+                         f'{MAX_IMAGE_PIXELS / 1e6:g} Mpx at most', 'size', (width, height))
+
+
 def colour_image(message):
-    """RGB uint8 (H, W, 3) of a CompressedImage or an rgb8/bgr8 Image; ImageError otherwise."""
+    """RGB uint8 (H, W, 3) of a CompressedImage or an rgb8/bgr8 Image of a size the features take
+    (check_image_size; a compressed image's size is checked from its header before decoding);
+    ImageError otherwise."""
     if isinstance(message, CompressedImage):
+        size = encoded_size(bytes(message.data[:65536]))
+        if size is not None:
+            check_image_size(*size)
         try:
             rgb = image_from_compressed(message)
         except ValueError as error:
             raise ImageError(str(error), 'undecodable') from None
         if rgb.ndim != 3:
             raise ImageError(f'format {message.format!r} is not a colour image', 'mono', rgb.shape[::-1])
-        return rgb
-    try:
-        return image_from_raw(message)
-    except ValueError as error:
-        raise ImageError(str(error), 'encoding', (message.width, message.height)) from None
+    else:
+        try:
+            rgb = image_from_raw(message)
+        except ValueError as error:
+            raise ImageError(str(error), 'encoding', (message.width, message.height)) from None
+    check_image_size(rgb.shape[1], rgb.shape[0])
+    return rgb
 
 
 def mono_image(mask, header):
@@ -182,7 +217,11 @@ def feature_messages(features, header, status_message=''):
     """(SkinEllipseArray, LabelledContour) of features.Features, with `header` (the silhouette: png_mono
     and mono_image of features.silhouette as 0/255)."""
     status = SkinEllipseArray.STATUS_OK if features.person else SkinEllipseArray.STATUS_NO_PERSON
-    message = status_message or ('' if features.person else 'no person in the image')
+    message = status_message
+    if not message and not features.person:
+        message = 'no person in the image'
+    elif not message and features.other_people:
+        message = f'{features.other_people} more person-sized region(s) in view: the largest is taken for the person'
     ellipses = SkinEllipseArray(header=header, status=status, status_message=message,
                                 face_visibility=float(features.frontness))
     for e in features.ellipses:

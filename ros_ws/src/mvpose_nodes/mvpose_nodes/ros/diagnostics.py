@@ -4,7 +4,8 @@ StageClock adds up the CPU seconds of the calling thread (time.thread_time) spen
 a node's work. NodeDiagnostics publishes the node's state once a second as diagnostic_msgs/DiagnosticArray
 on /diagnostics, the topic that ROS tools (rqt_robot_monitor, diagnostic_aggregator, Foxglove) read: one
 DiagnosticStatus named after the node, hardware_id the host, its level and message from the node, and as
-values the node's own counters and the CPU seconds since the node started:
+values the node's own counters and the CPU seconds since the node started (and, logged once and in the
+message, any publisher of another message type on a topic the node subscribes: foreign_publishers):
   cpu/process                   every thread of the process (time.process_time)
   cpu/thread/<name>             one thread (e.g. 'executor': rclpy's callbacks, taking and deserialising
                                 messages; 'preparing' and 'fitting': the fitter's two workers)
@@ -95,13 +96,37 @@ class NodeDiagnostics:
         self.threads = {'executor': threading.current_thread(), **(threads or {})}
         self.publisher = node.create_publisher(DiagnosticArray, DIAGNOSTICS_TOPIC, 10)
         self.hardware_id = socket.gethostname()
+        self.reported = set()   # (topic, type) of the publishers of a wrong type already logged
         node.create_timer(DIAGNOSTICS_PERIOD, self.publish)
 
     def publish(self):
         level, message, counters = self.state()
+        strangers = foreign_publishers(self.node)
+        for topic, found, expected in strangers:
+            if (topic, found) not in self.reported:
+                self.reported.add((topic, found))
+                self.node.get_logger().warning(f'{topic}: a publisher of {found} (not {expected}): DDS does not '
+                                               'connect it to this node, so its messages are not received')
+        if strangers:
+            level = 'error' if level == 'error' else 'warn'
+            message += '; ' + ', '.join(f'{topic} has a publisher of {found}' for topic, found, _ in strangers)
         status = DiagnosticStatus(level=LEVELS[level], name=self.node.get_fully_qualified_name(), message=message,
                                   hardware_id=self.hardware_id,
                                   values=status_values(self.clocks, self.threads, counters))
         array = DiagnosticArray(status=[status])
         array.header.stamp = self.node.get_clock().now().to_msg()
         self.publisher.publish(array)
+
+
+def foreign_publishers(node):
+    """[(topic, its publisher's type, the type `node` subscribes)] for each publisher on a topic the node
+    subscribes whose message type is another: DDS never connects the two, and this rmw (Fast DDS in Jazzy)
+    raises no incompatible-type event, so without this a wrong type on a topic is silence."""
+    strangers = []
+    for subscription in node.subscriptions:
+        kind = subscription.msg_type
+        expected = f"{kind.__module__.split('.')[0]}/msg/{kind.__name__}"
+        for info in node.get_publishers_info_by_topic(subscription.topic_name):
+            if info.topic_type != expected:
+                strangers.append((subscription.topic_name, info.topic_type, expected))
+    return strangers

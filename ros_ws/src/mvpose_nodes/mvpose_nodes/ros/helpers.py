@@ -1,4 +1,5 @@
 """rclpy helpers shared by the nodes and tools: the Jazzy run pattern, QoS conversions, graph look-ups."""
+import os
 import re
 import signal
 import sys
@@ -17,6 +18,10 @@ from mvpose_nodes.ros.params import ParameterError
 from mvpose_nodes.vision.skin import SkinModelError
 
 SPIN_PERIOD = 0.1  # [s] the longest a node takes to see a shutdown
+# [s] the longest a stopped node's clean-up may take. rclpy's Node.destroy_node() once spun for ever at 100 %
+# of a core in destroy_when_not_in_use() (py-spy; 1 in a few hundred stops, EventsExecutor), leaving an
+# orphan behind its launcher: past this the process says so and exits.
+CLEAN_UP_LIMIT = 5.0
 
 # Reliable, transient-local, depth 1: calibration, and the last skeleton for late subscribers.
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
@@ -65,11 +70,22 @@ def run_node(make_node, args=None):
         print(f'[ERROR] {make_node.__name__}: {error}', file=sys.stderr)
         return 2
     finally:
+        watchdog = threading.Timer(CLEAN_UP_LIMIT, abandon_clean_up, args=(getattr(make_node, '__name__', 'node'),))
+        watchdog.daemon = True
+        watchdog.start()
         executor.shutdown()
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
+        watchdog.cancel()
     return 0
+
+
+def abandon_clean_up(name):
+    """A node's clean-up that hangs (run_node): say it and end the process, which frees what it held."""
+    print(f'[WARN] {name}: clean-up after stopping hung for {CLEAN_UP_LIMIT:g} s in rclpy; exiting without it',
+          file=sys.stderr, flush=True)
+    os._exit(0)
 
 
 class StopSignal:

@@ -24,7 +24,8 @@ class MultiCameraNode(ReportOnce, Node):
     subscribed as /cam<K>/<name> for each configured camera; parameters: the node's table
     (ros/params.py, starting with multi_camera_parameters), declared here, values in self.values;
     on_frame_set(frame_set) gets each synchronised set (fitting.sync.SyncedSet: messages keyed by
-    (camera, name), missing_groups)."""
+    (camera, name), missing_groups), after its cameras' calibration (or calibration_wait); synchronised(frame_set)
+    as soon as it is synchronised."""
 
     def __init__(self, name, inputs, parameters):
         super().__init__(name)
@@ -78,8 +79,7 @@ class MultiCameraNode(ReportOnce, Node):
             self.last_input = time.monotonic()
             restarts = self.sync.restarts
             with self.clock('sync'):
-                for frame_set in self.sync.add((camera, topic), stamp_ns(message.header), message):
-                    self.held.add(frame_set, time.monotonic())
+                self.hold(self.sync.add((camera, topic), stamp_ns(message.header), message))
             if self.sync.restarts != restarts:
                 self.get_logger().info(f'/cam{camera}/{topic} went back in time (a bag played again?): '
                                        'synchronising afresh')
@@ -93,10 +93,18 @@ class MultiCameraNode(ReportOnce, Node):
         if self.last_input is not None and time.monotonic() - self.last_input > self.values['camera_timeout']:
             self.last_input = None
             with self.clock('sync'):
-                for frame_set in self.sync.flush():
-                    self.held.add(frame_set, time.monotonic())
+                self.hold(self.sync.flush())
             self.end_of_input()
         self.release_held()
+
+    def hold(self, frame_sets):
+        """Synchronised frame sets in, held until their calibration is in (release_held)."""
+        for frame_set in frame_sets:
+            self.synchronised(frame_set)
+            self.held.add(frame_set, time.monotonic())
+
+    def synchronised(self, frame_set):
+        """Called as each frame set is synchronised, before it waits for calibration (on_frame_set comes after)."""
 
     def end_of_input(self):
         """Called when the input has stopped (flush_when_idle): flush any synchroniser of the subclass's own."""

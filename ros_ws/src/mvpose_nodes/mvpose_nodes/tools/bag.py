@@ -8,7 +8,7 @@ import datetime
 import sys
 import time
 
-from mvpose_nodes.io.bagfile import BagReader, BagWriter, directory_size, reindex
+from mvpose_nodes.io.bagfile import METADATA_FILE, BagReader, BagWriter, directory_size, reindex
 from mvpose_nodes.tools.cli import ArgumentParser, UserError, exit_on_user_error
 from mvpose_nodes.io.interfaces import MessageTypeError, message_class
 
@@ -17,6 +17,18 @@ LATCHED_TOPIC_SUFFIXES = ('/camera_info', '/camera_pose')
 DISCOVERY_PERIOD = 0.5  # [s] how often `record` looks for new topics
 DRAIN_TIME = 0.5  # [s] how long `record` keeps taking messages after Ctrl-C
 FLUSH_PERIOD = 1.0  # [s] `record` puts what it received on the disk at least this often (BagWriter.flush)
+# `play` starts once discovery has been quiet this long [s]: four DDS participant announcement periods of the
+# Fast DDS profile ./mvpose runs with (config/fastdds.xml: 0.25 s). Measured here, a running subscriber was
+# matched 0.04-0.38 s after the player's publisher was made (20 trials), but on the test suite's loaded 2
+# cores 0.6 s of quiet once started the play before it. A process started without that profile announces
+# itself every 3 s (Fast DDS's default) and may be found later: use --wait-for-subscribers.
+DISCOVERY_SETTLE = 1.0
+DISCOVERY_LIMIT = 5.0  # [s] the longest `play` waits for discovery to settle
+# [s] the longest `play` waits for its subscribers to acknowledge a latched message (calibration) before it
+# plays on: a subscriber that had not yet matched the player's publisher on its side when the message went
+# out gets it at the publisher's next heartbeat, every 3 s in Fast DDS, and the images after it must not
+# arrive before it (measured: calibration 2-3 s behind the images made 2 of 10 demo runs fail).
+LATCHED_ACK_TIMEOUT = 4.0
 
 
 def build_parser(prog):
@@ -49,10 +61,16 @@ def build_parser(prog):
     play.add_argument('-d', '--delay', type=float, default=0.0, metavar='S',
                       help='wait S seconds after creating the publishers before the first message '
                            '(gives subscribers time to discover them)')
+    play.add_argument('--settle', type=float, default=DISCOVERY_SETTLE, metavar='S',
+                      help='before the first message, wait until the subscribers already running have matched the '
+                           'new publishers: until discovery has shown no change for S seconds (default '
+                           f'{DISCOVERY_SETTLE:g}; at most {DISCOVERY_LIMIT:g} s), so that a graph started before the '
+                           'player loses nothing; 0 starts at once, as ros2 bag play does')
     play.add_argument('--wait-for-subscribers', type=float, nargs='?', const=30.0, default=0.0, metavar='S',
                       help='before the first message, wait up to S seconds (default 30 when given) until every '
-                           'played topic (and /clock with --clock) has a matched subscriber, so that a graph started beside the player '
-                           'loses nothing (then --delay still applies)')
+                           'played topic (and /clock with --clock) has a matched subscriber, then for discovery to '
+                           'settle (--settle), so that a graph started after the player loses nothing (then --delay '
+                           'still applies)')
     play.add_argument('--clock', type=float, nargs='?', const=40.0, default=0.0, metavar='HZ',
                       help='also publish the bag time on /clock at HZ (default 40 when given)')
 
@@ -117,6 +135,10 @@ def describe(bag, path):
         lines.append(f'Unfinished:        {mcap_path.name}: its recorder did not close it; {recovery.messages} '
                      f'messages read from its complete chunks, {recovery.cut_bytes} bytes after them cut '
                      f'(`bag reindex` finishes it)')
+    disagreements = bag.metadata_disagreements()
+    if disagreements:
+        lines.append(f"Warning:           {METADATA_FILE} disagrees with the MCAP, whose figures these are "
+                     f"(`bag reindex` rewrites it): {'; '.join(disagreements)}")
     lines.append('Topic information:')
     width = max((len(t) for t in bag.topics), default=0)
     for topic in sorted(bag.topics.values(), key=lambda t: t.name):
@@ -128,9 +150,13 @@ def describe(bag, path):
 def play(args):
     if args.rate <= 0:
         raise UserError(f'--rate must be > 0 (got {args.rate})')
-    if min(args.start_offset, args.delay, args.clock, args.wait_for_subscribers) < 0:
-        raise UserError('--start-offset, --delay, --clock and --wait-for-subscribers must not be negative')
+    if min(args.start_offset, args.delay, args.clock, args.wait_for_subscribers, args.settle) < 0:
+        raise UserError('--start-offset, --delay, --clock, --settle and --wait-for-subscribers must not be negative')
     bag = BagReader(args.bag)
+    disagreements = bag.metadata_disagreements()
+    if disagreements:
+        print(f"[play] warning: {METADATA_FILE} of '{args.bag}' disagrees with its MCAP, which is played "
+              f"(`bag reindex` rewrites it): {'; '.join(disagreements)}", file=sys.stderr)
     topics = list(bag.topics) if not args.topics else args.topics
     missing = [t for t in topics if t not in bag.topics]
     if missing:
@@ -152,21 +178,91 @@ def play(args):
                 qos.durability = DurabilityPolicy.TRANSIENT_LOCAL
             publishers[topic] = node.create_publisher(classes[topic], topic, qos)
         clock = node.create_publisher(Clock, '/clock', 10) if args.clock else None
+        played_publishers = {**publishers, **({'/clock': clock} if clock else {})}
+        wait_for_discovery(node, played_publishers, args.settle, stop)
         if args.wait_for_subscribers:
-            wait_for_subscribers(node, {**publishers, **({'/clock': clock} if clock else {})},
-                                 args.wait_for_subscribers, stop)
+            wait_for_subscribers(node, played_publishers, args.wait_for_subscribers, stop)
+            # The nodes of a graph started with the player come up one after another: the later ones too.
+            wait_for_discovery(node, played_publishers, args.settle, stop)
         stop.event.wait(args.delay)
         begin_ns = bag.start_ns + int(args.start_offset * 1e9)
-        played = 0
+        audience = Audience(publishers, {topic for topic, publisher in publishers.items()
+                                         if publisher.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL})
+        print(f'[play] playing {len(topics)} topics of {args.bag} at rate {args.rate:g}', file=sys.stderr, flush=True)
         try:
             while not stop.stopped:
-                played += play_once(bag, topics, begin_ns, publishers, clock, args, stop)
+                play_once(bag, topics, begin_ns, audience, clock, args, stop)
                 if not args.loop:
                     break
             wait_for_acknowledgements(publishers.values(), timeout_sec=2.0)
         finally:
             node.destroy_node()
-    print(f'[play] published {played} messages on {len(topics)} topics', file=sys.stderr)
+    print(f'[play] published {audience.published} messages on {len(topics)} topics', file=sys.stderr)
+    if audience.unheard:
+        print(f'[play] warning: {audience.describe_unheard()} were published before any subscriber had matched '
+              'their topic, so nobody received them (start the subscribers first, or play with '
+              '--wait-for-subscribers)', file=sys.stderr)
+    if audience.unacknowledged:
+        print(f"[play] warning: latched messages on {', '.join(sorted(audience.unacknowledged))} were not "
+              f'acknowledged by every subscriber within {LATCHED_ACK_TIMEOUT:g} s (played on regardless)',
+              file=sys.stderr)
+
+
+class Audience:
+    """The player's publishers, and which messages had nobody to hear them: per topic, those published
+    while no subscriber had matched, before the first that had one (a topic nobody ever subscribes is
+    not counted: playing it is not a loss). A message on a `latched` topic (transient-local: calibration)
+    is played on from only once its subscribers have acknowledged it (LATCHED_ACK_TIMEOUT)."""
+
+    def __init__(self, publishers, latched=()):
+        from rclpy.duration import Duration
+        self.publishers, self.latched = publishers, set(latched)
+        self.ack_timeout = Duration(seconds=LATCHED_ACK_TIMEOUT)
+        self.published = 0
+        self.before_first_subscriber = dict.fromkeys(publishers, 0)
+        self.unheard = {}   # topic -> messages published before its first subscriber matched
+        self.unacknowledged = set()   # latched topics a subscriber did not acknowledge in time
+
+    def publish(self, topic, data):
+        publisher = self.publishers[topic]
+        publisher.publish(data)
+        self.published += 1
+        if topic in self.latched and not publisher.wait_for_all_acked(self.ack_timeout):
+            self.unacknowledged.add(topic)
+        if topic in self.before_first_subscriber:
+            if publisher.get_subscription_count():
+                count = self.before_first_subscriber.pop(topic)
+                if count:
+                    self.unheard[topic] = count
+            else:
+                self.before_first_subscriber[topic] += 1
+
+    def describe_unheard(self):
+        """'4 messages (3 on /a, 1 on /b)'"""
+        parts = ', '.join(f'{count} on {topic}' for topic, count in sorted(self.unheard.items()))
+        return f'{sum(self.unheard.values())} messages ({parts})'
+
+
+def wait_for_discovery(node, publishers, settle, stop):
+    """Until discovery is quiet: what the graph shows of the played topics' subscribers, and what the
+    publishers have matched, unchanged for `settle` seconds (at most DISCOVERY_LIMIT). DDS gives no event
+    for "every participant running has been found": a new process finds the others as they announce
+    themselves, so the wait is for that to stop changing."""
+    if not settle:
+        return
+
+    def snapshot():
+        return (tuple(node.count_subscribers(topic) for topic in publishers),
+                tuple(publisher.get_subscription_count() for publisher in publishers.values()),
+                len(node.get_node_names_and_namespaces()))
+
+    started = changed = time.monotonic()
+    seen = snapshot()
+    while not stop.stopped and time.monotonic() - changed < settle and time.monotonic() - started < DISCOVERY_LIMIT:
+        stop.event.wait(0.02)
+        now = snapshot()
+        if now != seen:
+            seen, changed = now, time.monotonic()
 
 
 def wait_for_subscribers(node, publishers, timeout, stop):
@@ -182,8 +278,8 @@ def wait_for_subscribers(node, publishers, timeout, stop):
         print(f"[play] no subscriber after {timeout:g} s on: {', '.join(unmatched)}; playing anyway", file=sys.stderr)
 
 
-def play_once(bag, topics, begin_ns, publishers, clock, args, stop):
-    """Publish the bag once from `begin_ns` at `args.rate`; the number of messages published."""
+def play_once(bag, topics, begin_ns, audience, clock, args, stop):
+    """Publish the bag once from `begin_ns` at `args.rate` through `audience` (an Audience)."""
     from builtin_interfaces.msg import Time
     from rosgraph_msgs.msg import Clock
     wall_start = time.monotonic()
@@ -206,14 +302,13 @@ def play_once(bag, topics, begin_ns, publishers, clock, args, stop):
             stop.event.wait((min(due, next_clock) if clock else due) - now)
         if stop.stopped:
             break
-        publishers[topic_info.name].publish(data)
+        audience.publish(topic_info.name, data)
         count += 1
         if show_progress and count % 10 == 0:
             print(f'\r[play] {(log_time_ns - begin_ns) / 1e9:7.2f} s  {100 * (log_time_ns - begin_ns) / total:5.1f} %'
                   f'  {count} messages', end='', file=sys.stderr, flush=True)
     if show_progress:
         print(file=sys.stderr)
-    return count
 
 
 def record(args):

@@ -37,6 +37,11 @@ NECK_BELOW_TOP = 0.17    # base of the neck below the head top, as a share of th
 NECK_BELOW_SKIN = 0.03   # base of the neck below the lowest skin of the neck, as a share of the stature
 BOX_SCALE = 4            # the person is found on an image this many times smaller, then processed in its box
 BOX_MARGIN = 0.05        # of the person's size, around its box
+# The image sizes FeatureExtractor takes [px]: the person is first found at 1/BOX_SCALE of the size, which
+# must keep a few pixels a side; above 25 Mpx (beyond 5000×5000; the studio's cameras are 1920×1080) one
+# image would take seconds and gigabytes.
+MIN_IMAGE_SIDE = 8 * BOX_SCALE
+MAX_IMAGE_PIXELS = 25_000_000
 KEYPOINT_NAMES = ('root', 'head', 'neck', 'left_wrist', 'right_wrist', 'left_elbow', 'right_elbow',
                   'left_ankle', 'right_ankle', 'left_knee', 'right_knee')
 
@@ -86,6 +91,7 @@ class Features:
     contour: ContourLabels = None
     frontness: float = 0.0                           # share of the head that is skin: 1 = the face is seen
     timings: dict = field(default_factory=dict)      # stage -> seconds
+    other_people: int = 0                            # other foreground blobs of a person's size (not used)
 
     def visible_keypoints(self):
         """{name: (x, y, confidence)} of the keypoints found (as the camera_features messages carry them)."""
@@ -123,7 +129,7 @@ class FeatureExtractor:
         area = height * width
         s = self.settings
         min_person = max(50, int(s.min_person_fraction * area))
-        box = self._person_box(rgb, min_person)
+        box, other_people = self._person_box(rgb, min_person)
         silhouette, skin = np.zeros((height, width), bool), np.zeros((height, width), bool)
         if box is None:
             lap('silhouette')
@@ -150,7 +156,7 @@ class FeatureExtractor:
         contour = label_contour(person, {n: (k.x, k.y) if k.visible else None for n, k in keypoints.items()},
                                 hand_masks)
         lap('contour')
-        features = Features(True, silhouette, skin, ellipses, keypoints, contour, frontness, timings)
+        features = Features(True, silhouette, skin, ellipses, keypoints, contour, frontness, timings, other_people)
         return _shifted(features, x0, y0)
 
     def _foreground(self, rgb, window):
@@ -162,20 +168,22 @@ class FeatureExtractor:
         return self.background.foreground(rgb, window)
 
     def _person_box(self, rgb, min_person):
-        """(x0, y0, x1, y1) around the largest foreground blob, found on a 4× smaller image, with a
-        margin of BOX_MARGIN of the blob's size; None when there is no blob of a person's size."""
+        """((x0, y0, x1, y1) around the largest foreground blob, found on a 4× smaller image, with a
+        margin of BOX_MARGIN of the blob's size, or None when there is no blob of a person's size; and how
+        many other blobs are of a person's size: one person is fitted, the largest.)"""
         height, width = rgb.shape[:2]
         small = cv2.resize(rgb, (width // BOX_SCALE, height // BOX_SCALE), interpolation=cv2.INTER_NEAREST)
         foreground = self._foreground(small, (slice(0, height, BOX_SCALE), slice(0, width, BOX_SCALE)))
         labels, areas = components(foreground)
         if len(areas) < 2:
-            return None
+            return None, 0
         largest = 1 + int(np.argmax(areas[1:]))
         if areas[largest] * BOX_SCALE ** 2 < min_person:
-            return None
+            return None, 0
+        others = int(np.count_nonzero(areas[1:] * BOX_SCALE ** 2 >= min_person)) - 1
         x, y, w, h = (v * BOX_SCALE for v in component_box(labels, largest))
         margin = int(BOX_MARGIN * max(w, h)) + 2 * BOX_SCALE
-        return max(x - margin, 0), max(y - margin, 0), min(x + w + margin, width), min(y + h + margin, height)
+        return (max(x - margin, 0), max(y - margin, 0), min(x + w + margin, width), min(y + h + margin, height)), others
 
     def _interpret(self, regions, silhouette, points, skin):
         # In the person's box: `silhouette`, `skin`, `points` and `regions` are in its coordinates.

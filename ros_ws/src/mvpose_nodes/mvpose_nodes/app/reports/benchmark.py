@@ -58,19 +58,29 @@ def cpu_ticks(stat_text):
     return int(fields[11]) + int(fields[12])   # fields 14 and 15 of proc(5), counted from 'state' = 3
 
 
-def peak_rss_kib(status_text):
-    """VmHWM [kB] of a /proc/PID/status text, or None when it has none (e.g. a zombie)."""
+def status_kib(status_text, key='VmHWM'):
+    """A size [kB] of a /proc/PID/status text (VmHWM: peak RSS, VmRSS: RSS now), or None when it has none
+    (e.g. a zombie)."""
     for line in status_text.splitlines():
-        if line.startswith('VmHWM:'):
+        if line.startswith(f'{key}:'):
             return int(line.split()[1])
     return None
+
+
+def resident_mib(pid):
+    """RSS [MiB] of a running process now, or NaN when it is gone."""
+    try:
+        kib = status_kib(Path(f'/proc/{pid}/status').read_text(), 'VmRSS')
+    except OSError:
+        kib = None
+    return kib / 1024 if kib is not None else float('nan')
 
 
 def sample_process(pid):
     """(cpu ticks, peak RSS kB) of a running process, or None when it is gone."""
     try:
         return (cpu_ticks(Path(f'/proc/{pid}/stat').read_text()),
-                peak_rss_kib(Path(f'/proc/{pid}/status').read_text()))
+                status_kib(Path(f'/proc/{pid}/status').read_text()))
     except (OSError, IndexError, ValueError):
         return None
 
@@ -137,6 +147,18 @@ class BenchResult:
     wall_seconds: float = 0.0
     launched: float = None                          # t the graph's processes were started
     connected: float = None                         # t every node's topics had matched (graph_run.wait_for_connections)
+    samples: list = field(default_factory=list)     # SoakSample, every sample_every frame sets answered (soak)
+
+
+@dataclass
+class SoakSample:
+    """The graph part-way through a soak: frame sets answered so far, seconds since the first was sent,
+    each node's RSS [MiB] now, and the median end-to-end latency [ms] of the frame sets fitted since the
+    sample before."""
+    answered: int
+    seconds: float
+    resident_mib: dict
+    latency_ms: float
 
 
 def _number(value, width=8, digits=1):
@@ -202,3 +224,32 @@ def format_table(result):
     return '\n'.join(lines)
 
 
+
+
+def format_soak(result, warm_up):
+    """The printed report of a soak (a BenchResult with samples): memory of each node and latency over
+    time, and what was not fitted. Growth is measured from the first sample at or after `warm_up` frame
+    sets (start-up allocations, caches and numba are not a leak) to the last."""
+    samples = result.samples
+    fitted = len(result.skeletons)
+    lines = [f'soak: {result.bag}  ({len(result.sent)} frame sets sent, cameras {" ".join(map(str, result.cameras))}, '
+             f'{result.width}×{result.height}, window {result.window}, {result.wall_seconds / 60:.1f} min)',
+             f'  fitted {fitted}; too few views {result.unfitted}; passed over {result.overtaken}; skipped by the fitter '
+             f'{result.skipped}; dropped (no answer in {STALL_TIMEOUT:.0f} s) {result.dropped}']
+    if not samples:
+        return '\n'.join(lines + ['  (no sample: fewer frame sets than one sample period)'])
+    names = list(samples[0].resident_mib)
+    lines.append('  frame sets   minutes   latency ms   ' + '  '.join(f'{name:>22}' for name in names) + '   (RSS MiB)')
+    for sample in samples:
+        lines.append(f'  {sample.answered:>10}  {sample.seconds / 60:>8.1f}  {_number(sample.latency_ms, 11, 0)}   '
+                     + '  '.join(f'{_number(sample.resident_mib[name], 22, 1)}' for name in names))
+    base = next((s for s in samples if s.answered >= warm_up), samples[-1])
+    last = samples[-1]
+    growth = {name: last.resident_mib[name] - base.resident_mib[name] for name in names}
+    lines.append(f'  RSS growth from {base.answered} to {last.answered} frame sets [MiB]: '
+                 + ', '.join(f'{name} {_number(value, 0, 1)}' for name, value in growth.items()))
+    after_warm_up = [s.latency_ms for s in samples if s.answered > base.answered and np.isfinite(s.latency_ms)]
+    if after_warm_up:
+        lines.append(f'  latency drift: median of the first sample after warm-up {after_warm_up[0]:.0f} ms, of the last '
+                     f'{after_warm_up[-1]:.0f} ms (range {min(after_warm_up):.0f}–{max(after_warm_up):.0f} ms)')
+    return '\n'.join(lines)
