@@ -59,10 +59,13 @@ def stacks_of_hung(process):
 class Background:
     """A `./mvpose ARGS` process running beside the test; stopped with SIGINT like Ctrl-C."""
 
-    def __init__(self, *args):
+    def __init__(self, *args, prefix=(), environment=None):
+        """`prefix`: a command that runs the rest (e.g. `ip netns exec NS`); `environment`: variables set on
+        top of this process's."""
         self.args = args
-        self.process = subprocess.Popen(mvpose_command(*args), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                                        text=True, cwd=ROOT, start_new_session=True, env=fault_handler_environment())
+        self.process = subprocess.Popen([*prefix, *mvpose_command(*args)], stdout=subprocess.PIPE,
+                                        stderr=subprocess.PIPE, text=True, cwd=ROOT, start_new_session=True,
+                                        env={**fault_handler_environment(), **(environment or {})})
 
     def wait_for_stderr_line(self, fragment, timeout=20):
         """Block until the process writes a stderr line containing `fragment`; all lines so far."""

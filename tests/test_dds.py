@@ -1,4 +1,5 @@
 """Messages between separate processes over DDS (loopback only), through rclpy and the topic tools."""
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -81,6 +82,24 @@ def test_topic_list_shows_types_and_hz_measures(background):
     rates = [float(line.split(':')[1]) for line in hz.splitlines() if line.startswith('average rate:')]
     assert rates and all(rate > 0 for rate in rates), hz
     publisher.interrupt()
+
+
+def test_topic_bw_and_doctor_measure_a_topics_bandwidth(background):
+    """10 Hz of 20 000-character strings: 200 kB/s and more (the serialised size has a header), as `topic bw`
+    and `doctor` measure it; the doctor lists the publishing node on this host and the settings in force."""
+    publisher = background('topic', 'pub', '/test/big', 'std_msgs/msg/String', '{data: %s}' % ('x' * 20000),
+                           '--rate', 10)
+    bw = run_mvpose('topic', 'bw', '/test/big', '--duration', 4, timeout=60).stdout
+    rates = [float(line.split()[0]) for line in bw.splitlines() if line.endswith('messages') and 'KB/s' in line]
+    assert rates and all(150 < rate < 260 for rate in rates), bw
+    doctor = run_mvpose('doctor', '--bandwidth-time', 3, timeout=60).stdout
+    publisher.interrupt()
+    row = next(line for line in doctor.splitlines() if line.startswith('  /test/big '))
+    assert 'std_msgs/msg/String' in row and '1 pub (' in row, doctor
+    assert 150 < float(row.split()[-2]) < 260 and row.split()[-1] == 'KB/s', row
+    assert re.search(r'^  host \w+ \(this host\)[^\n]*\n(?:    .*\n)*    /mvpose_topic_pub$', doctor, re.MULTILINE), doctor
+    assert re.search(r'^  ROS_AUTOMATIC_DISCOVERY_RANGE +LOCALHOST$', doctor, re.MULTILINE), doctor
+    assert re.search(r'^  DDS-Security +(NOT )?built in', doctor, re.MULTILINE), doctor
 
 
 STUCK_NODE_SCRIPT = '''

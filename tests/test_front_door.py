@@ -10,7 +10,8 @@ from common import ROOT, assert_one_line_error, mvpose_command, run_mvpose
 pytestmark = pytest.mark.cli
 
 SUBCOMMANDS = [['test'], ['demo'], ['run'], ['exec'], ['launch'], ['bag'], ['bag', 'record'], ['bag', 'play'],
-               ['bag', 'info'], ['topic'], ['topic', 'echo'], ['topic', 'list'], ['topic', 'hz'], ['topic', 'pub']]
+               ['bag', 'info'], ['topic'], ['topic', 'echo'], ['topic', 'list'], ['topic', 'hz'], ['topic', 'bw'], ['topic', 'pub'],
+               ['doctor']]
 
 
 def test_top_level_help_lists_every_subcommand():

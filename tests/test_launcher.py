@@ -178,6 +178,7 @@ def test_param_values_follow_launch_ros_typing_and_find_pkg_share_finds_the_para
 launch:
   - arg: {name: flag, default: 'true'}
   - arg: {name: number, default: '3'}
+  - arg: {name: cameras, default: '[1, 2]'}
   - node:
       pkg: mvpose_nodes
       exec: bag
@@ -193,6 +194,7 @@ launch:
         - {name: fallback, value: $(env MVPOSE_TEST_UNSET_VARIABLE 7)}
         - {name: numbers, value: [1.0, 2.5]}
         - {name: names, value: [a, $(var flag)x]}
+        - {name: substituted_list, value: $(var cameras)}   # read as YAML: a list
   - executable: {name: player, cmd: $(exec-in-pkg bag mvpose_nodes) play bags/x}
 ''')
     assert main([str(path), '--dry-run']) == 0
@@ -203,7 +205,8 @@ launch:
     assert Path(params_file).is_file()
     values = [word for word in command if ':=' in word and not word.startswith('__')]
     assert values == ['plain_int:=3', "quoted_int:='3'", 'substituted_int:=3', 'substituted_flag:=true', 'text:=cam3',
-                      'rate:=2.5', 'fallback:=7', 'numbers:=[1.0, 2.5]', 'names:=[a, truex]']
+                      'rate:=2.5', 'fallback:=7', 'numbers:=[1.0, 2.5]', 'names:=[a, truex]',
+                      'substituted_list:=[1, 2]']
     assert shlex.split(player)[1:] == [str(prefix / 'lib' / 'mvpose_nodes' / 'bag'), 'play', 'bags/x']
 
 
@@ -513,10 +516,11 @@ def test_the_shipped_launch_files_use_only_keys_of_ros2_launch_yaml_format():
             ('launch: [{arg: {name: x, default: 3}}]', 'launch[0].arg: default is not a string'),
             ('launch: [{node: {exec: e, remap: [{from: a, too: b}]}}]', 'launch[0].node.remap[0]: too is no key of remap')]:
         assert problem in format_problems(yaml.safe_load(text))
-    for file_name in ('mvpose.launch.yaml', 'markers.launch.yaml'):
+    for file_name in ('mvpose.launch.yaml', 'mvpose8.launch.yaml', 'markers.launch.yaml', 'camera_host.launch.yaml',
+                      'fitting_host.launch.yaml'):
         document = yaml.safe_load((LAUNCH_DIR / file_name).read_text())
         assert format_problems(document) == [], file_name
-        assert {kind for action in document['launch'] for kind in action} == {'arg', 'node'}
+        assert {kind for action in document['launch'] for kind in action} <= {'arg', 'node'}
 
 
 @pytest.mark.parametrize('file_name, tracker, fusion, remap', [
@@ -538,6 +542,21 @@ def test_the_shipped_launch_files_start_a_node_per_camera_and_one_fusing_them(ca
         assert lines[-1][2:] == ['--ros-args', '-r', f'__node:={fusion}', '--params-file', str(fusion_params),
                                  '-p', f'cameras:={cameras}']
     assert all(spec.required for spec in load_launch_file(LAUNCH_DIR / file_name))  # on_exit: shutdown, each
+
+
+def test_the_eight_camera_and_the_host_launch_files(capsys):
+    """mvpose8: a camera_features node in each of /cam1 ... /cam8 and the fitter with all 8; the split: one
+    camera's node per camera host (camera:=K), the fitter with the cameras listed, both respawning."""
+    assert main([str(LAUNCH_DIR / 'mvpose8.launch.yaml'), '--dry-run']) == 0
+    lines = [shlex.split(line) for line in capsys.readouterr().out.splitlines()]
+    assert [line[0] for line in lines] == [f'[/cam{k}/camera_features]' for k in range(1, 9)] + ['[skeleton_fitter]']
+    assert lines[-1][-2:] == ['-p', 'cameras:=[1, 2, 3, 4, 5, 6, 7, 8]']
+    assert main([str(LAUNCH_DIR / 'camera_host.launch.yaml'), 'camera:=4', '--dry-run']) == 0
+    assert shlex.split(capsys.readouterr().out)[0] == '[/cam4/camera_features]'
+    assert main([str(LAUNCH_DIR / 'fitting_host.launch.yaml'), 'cameras:=[2, 6]', '--dry-run']) == 0
+    assert shlex.split(capsys.readouterr().out)[-2:] == ['-p', 'cameras:=[2, 6]']
+    for file_name, arguments in (('camera_host.launch.yaml', {'camera': '3'}), ('fitting_host.launch.yaml', {})):
+        assert [spec.respawn for spec in load_launch_file(LAUNCH_DIR / file_name, arguments)] == [True]
 
 
 @pytest.mark.parametrize('options', [[], ['launch.yaml', '--sigint-timeout', '-1'], ['launch.yaml', '--bogus']])

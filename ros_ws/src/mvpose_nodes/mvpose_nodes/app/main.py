@@ -22,6 +22,7 @@ PACKAGE = 'mvpose_nodes'
 ROUTED_TOOLS = {
     'bag': ('mvpose_nodes.tools.bag', 'record, play or inspect rosbag2 MCAP bags'),
     'topic': ('mvpose_nodes.tools.topic', 'echo, list, measure or publish live topics'),
+    'doctor': ('mvpose_nodes.tools.doctor', "DDS settings, the graph's nodes by host, topics with their bandwidth"),
     'launch': ('mvpose_nodes.tools.launch', 'start the nodes of a launch YAML file as separate processes'),
     'demo': ('mvpose_nodes.app.demo', 'replay a bag through the graph and show the skeleton (README command 1)'),
     'synth': ('mvpose_nodes.app.synth', 'make an i3DPost-like multi-camera bag with exact ground truth'),

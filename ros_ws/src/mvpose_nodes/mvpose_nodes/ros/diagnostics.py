@@ -3,7 +3,7 @@
 StageClock adds up the CPU seconds of the calling thread (time.thread_time) spent in each named stage of
 a node's work. NodeDiagnostics publishes the node's state once a second as diagnostic_msgs/DiagnosticArray
 on /diagnostics, the topic that ROS tools (rqt_robot_monitor, diagnostic_aggregator, Foxglove) read: one
-DiagnosticStatus named after the node, hardware_id the host, its level and message from the node, and as
+DiagnosticStatus named after the node, hardware_id the host (host_identity: its name and IPv4 addresses), its level and message from the node, and as
 values the node's own counters and the CPU seconds since the node started (and, logged once and in the
 message, any publisher of another message type on a topic the node subscribes: foreign_publishers):
   cpu/process                   every thread of the process (time.process_time)
@@ -13,7 +13,9 @@ message, any publisher of another message type on a topic the node subscribes: f
 What no stage covers in a thread is rclpy's own work there (take, deserialise, executor); what no
 thread covers in the process is DDS's threads (transport, discovery) and the interpreter's.
 """
+import fcntl
 import socket
+import struct
 import threading
 import time
 from contextlib import contextmanager
@@ -23,6 +25,26 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 DIAGNOSTICS_TOPIC = '/diagnostics'
 DIAGNOSTICS_PERIOD = 1.0   # [s], as ROS's diagnostic_updater publishes
 LEVELS = {'ok': DiagnosticStatus.OK, 'warn': DiagnosticStatus.WARN, 'error': DiagnosticStatus.ERROR}
+
+
+def host_addresses():
+    """{interface: IPv4 address} of this host's interfaces that have one (loopback included)."""
+    addresses = {}
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+        for _, name in socket.if_nameindex():
+            try:   # SIOCGIFADDR (linux/sockios.h): the interface's address, in a struct ifreq
+                answer = fcntl.ioctl(probe.fileno(), 0x8915, struct.pack('256s', name.encode()[:15]))
+            except OSError:   # no IPv4 address (or down)
+                continue
+            addresses[name] = socket.inet_ntoa(answer[20:24])
+    return addresses
+
+
+def host_identity():
+    """This host as DiagnosticStatus.hardware_id names it: 'NAME (ADDRESS, ...)', its IPv4 addresses
+    other than loopback; the name alone is not enough where hosts share one (network namespaces, clones)."""
+    addresses = [address for name, address in host_addresses().items() if not address.startswith('127.')]
+    return f'{socket.gethostname()} ({", ".join(addresses) or "loopback only"})'
 
 
 class StageClock:
@@ -95,7 +117,7 @@ class NodeDiagnostics:
         self.node, self.state, self.clocks = node, state, list(clocks)
         self.threads = {'executor': threading.current_thread(), **(threads or {})}
         self.publisher = node.create_publisher(DiagnosticArray, DIAGNOSTICS_TOPIC, 10)
-        self.hardware_id = socket.gethostname()
+        self.hardware_id = host_identity()
         self.reported = set()   # (topic, type) of the publishers of a wrong type already logged
         node.create_timer(DIAGNOSTICS_PERIOD, self.publish)
 

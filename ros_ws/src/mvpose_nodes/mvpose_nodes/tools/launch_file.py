@@ -389,27 +389,27 @@ def _parameter_arguments(params, substitute):
 
 def _parameter_value(value, substitute):
     """A param value as launch_ros evaluates it: a string with a substitution is read as YAML once
-    substituted; other scalars and strings are kept; a list's items must end up of one type."""
-    def scalar(item):
+    substituted (so '$(var cameras)' with cameras:='[3, 5]' is a list); other scalars and strings are kept;
+    a list's items must end up of one type."""
+    def evaluated(item):
         if isinstance(item, str):
             fragments = substitute.fragments(item, 'value')
             if any(substituted for _, substituted in fragments):
                 text = ''.join(fragment for fragment, _ in fragments)
                 try:
-                    item = yaml.safe_load(text) if text else text
+                    return yaml.safe_load(text) if text else text
                 except yaml.YAMLError:
                     raise UserError(f"value '{text}' is not valid YAML") from None
-        if not isinstance(item, SCALARS):
-            raise UserError(f"'value' must be a bool, number or string, or a list of them; got {item!r}")
         return item
-    if not isinstance(value, list):
-        return scalar(value)
-    items = [scalar(item) for item in value]
+    value = evaluated(value) if not isinstance(value, list) else [evaluated(item) for item in value]
+    items = value if isinstance(value, list) else [value]
+    if not all(isinstance(item, SCALARS) for item in items):
+        raise UserError(f"'value' must be a bool, number or string, or a list of them; got {value!r}")
     if not items:
         raise UserError("'value' is an empty list (ROS cannot tell its type)")
     if len({type(item) for item in items}) > 1:   # launch_ros refuses [1, 2.5] too: write [1.0, 2.5]
         raise UserError(f"a list value's items must all have one type (bool, int, float or str); got {items}")
-    return items
+    return value
 
 
 class Substitutions:

@@ -1,4 +1,4 @@
-"""`topic echo | list | hz | pub`: ros2cli's topic verbs, for environments without ros2cli."""
+"""`topic echo | list | hz | bw | pub`: ros2cli's topic verbs, for environments without ros2cli."""
 import math
 import sys
 import time
@@ -43,6 +43,13 @@ def build_parser(prog):
     hz.add_argument('-w', '--window', type=int, default=10000, help='number of intervals averaged (default 10000)')
     hz.add_argument('--duration', type=float, metavar='S', help='stop after S seconds')
 
+    bw = verbs.add_parser('bw', help='measure the bandwidth of a topic',
+                          description='Print the bandwidth a topic takes (serialised messages received) every '
+                                      'second, like ros2 topic bw.')
+    bw.add_argument('topic')
+    bw.add_argument('-w', '--window', type=int, default=100, help='number of messages averaged (default 100)')
+    bw.add_argument('--duration', type=float, metavar='S', help='stop after S seconds')
+
     pub = verbs.add_parser('pub', help='publish a message given as YAML',
                            description='Publish a message, like ros2 topic pub, e.g. '
                                        "topic pub /x std_msgs/msg/String '{data: hello}' --once")
@@ -63,7 +70,7 @@ def build_parser(prog):
 def main(argv=None, prog='topic'):
     args = build_parser(prog).parse_args(sys.argv[1:] if argv is None else argv)
     with exit_on_user_error(f'{prog} {args.verb}'):
-        return {'echo': echo, 'list': list_topics, 'hz': hz, 'pub': pub}[args.verb](args)
+        return {'echo': echo, 'list': list_topics, 'hz': hz, 'bw': bw, 'pub': pub}[args.verb](args)
 
 
 def _formatter(args):
@@ -162,26 +169,54 @@ def rate_statistics(stamps, window):
     return 1.0 / mean if mean > 0 else math.inf, min(intervals), max(intervals), std, len(intervals)
 
 
+def human_bytes(count):
+    """A byte count as ros2 topic bw prints it: B, KB, MB (powers of 1000)."""
+    for unit, size in (('MB', 1e6), ('KB', 1e3)):
+        if count >= size:
+            return f'{count / size:.2f} {unit}'
+    return f'{count:.0f} B'
+
+
 def hz(args):
+    def report(received):
+        stats = rate_statistics([at for at, _ in received], args.window)
+        return (f'average rate: {stats[0]:.3f}\n\tmin: {stats[1]:.3f}s max: {stats[2]:.3f}s std dev: {stats[3]:.5f}s '
+                f'window: {stats[4]}' if stats else 'no new messages')
+    return measure(args, 'mvpose_topic_hz', report, args.window + 1)
+
+
+def bw(args):
+    def report(received):
+        if len(received) < 2:
+            return 'no new messages'
+        sizes = [size for _, size in received]
+        seconds = received[-1][0] - received[0][0]
+        return (f'{human_bytes(sum(sizes[1:]) / seconds)}/s from {len(sizes)} messages\n\tMessage size mean: '
+                f'{human_bytes(sum(sizes) / len(sizes))} min: {human_bytes(min(sizes))} max: {human_bytes(max(sizes))}')
+    return measure(args, 'mvpose_topic_bw', report, args.window)
+
+
+def measure(args, node_name, report, window):
+    """Subscribe to args.topic (serialised messages) once it has a publisher and print report([(arrival
+    time [s], size [bytes]), ...]) of the last `window` messages every second, until args.duration or Ctrl-C."""
     import rclpy
     from mvpose_nodes.ros.helpers import StopSignal, subscription_qos_for, wait_for_publishers
     with StopSignal() as stop:
-        node = rclpy.create_node('mvpose_topic_hz')
+        node = rclpy.create_node(node_name)
         published_type = wait_for_publishers(node, args.topic, args.duration or math.inf, stop)
         if published_type is None:
             return 130 if stop.stopped else 1
-        stamps = []
-        node.create_subscription(message_class(published_type), args.topic, lambda _: stamps.append(time.monotonic()),
+        received = []
+        node.create_subscription(message_class(published_type), args.topic,
+                                 lambda data: received.append((time.monotonic(), len(data))),
                                  subscription_qos_for(node, args.topic), raw=True)
         started = next_report = time.monotonic()
         while not stop.stopped and not (args.duration and time.monotonic() - started > args.duration):
             rclpy.spin_once(node, timeout_sec=0.05)
             if time.monotonic() >= next_report + 1.0:
                 next_report = time.monotonic()
-                stats = rate_statistics(stamps, args.window)
-                print(f'average rate: {stats[0]:.3f}\n\tmin: {stats[1]:.3f}s max: {stats[2]:.3f}s '
-                      f'std dev: {stats[3]:.5f}s window: {stats[4]}' if stats else 'no new messages', flush=True)
-                del stamps[:-args.window - 1]
+                print(report(received), flush=True)
+                del received[:-window]
         node.destroy_node()
     return 0
 

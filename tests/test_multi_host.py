@@ -1,0 +1,114 @@
+"""Issue 16: the graph split over hosts, each host a Linux network namespace of its own (network.py): a
+camera_features node on each of three camera hosts (the player beside camera 3's), the skeleton_fitter,
+the recorder and an echo on a fitting host, started with the launch files a real split uses
+(camera_host.launch.yaml, fitting_host.launch.yaml). Discovery by multicast on one switched subnet, or
+without multicast through ROS_STATIC_PEERS across routed subnets; the skeletons the fitting host records
+are those of the same launch files on one host."""
+import re
+
+import numpy as np
+import pytest
+import yaml
+from common import GRAPH_CAMERAS, GRAPH_INPUTS, Background
+from network import VirtualNetwork, unavailable
+
+from mvpose_nodes.io.bagfile import BagReader
+
+pytestmark = pytest.mark.graph
+
+LAUNCH = 'ros_ws/src/mvpose_nodes/launch'
+FRAME_SETS = 5
+HOSTS = (*(f'cam{k}' for k in GRAPH_CAMERAS), 'fitting')
+PLAYER_HOST = f'cam{GRAPH_CAMERAS[0]}'
+
+
+@pytest.fixture(scope='module')
+def namespaces():
+    reason = unavailable()
+    if reason:
+        pytest.skip(f'no network namespaces here: {reason}')
+
+
+@pytest.fixture(scope='module')
+def graph_bag(synth_bag):
+    return synth_bag('--cameras', *GRAPH_CAMERAS, '--frames', '70-74', '--resolution', '960x540')
+
+
+def run_split_graph(start, bag, record_to):
+    """The graph's processes started with start(host, *mvpose args) (on their hosts, or all on this one),
+    the bag played at a rate it keeps up with; {stamp [ns]: (15, 3) joints [m]} of the skeletons the
+    fitting host's recorder wrote to `record_to`, and those its echo printed."""
+    recorder = start('fitting', 'bag', 'record', '-o', record_to, '--topics', '/mvpose/skeleton')
+    echo = start('fitting', 'topic', 'echo', '/mvpose/skeleton', '--count', FRAME_SETS, '--timeout', 240)
+    start('fitting', 'launch', f'{LAUNCH}/fitting_host.launch.yaml', f'cameras:={list(GRAPH_CAMERAS)}')
+    for k in GRAPH_CAMERAS:
+        start(f'cam{k}', 'launch', f'{LAUNCH}/camera_host.launch.yaml', f'camera:={k}')
+    player = start(PLAYER_HOST, 'bag', 'play', bag, '--rate', 0.2, '--topics', *GRAPH_INPUTS,
+                   '--wait-for-subscribers', 120)
+    code, _, err = player.finish(timeout=200)
+    assert code == 0, err
+    code, out, err = echo.finish(timeout=240)
+    assert code == 0, err
+    echoed = {skeleton_stamp(d): skeleton_joints(d) for d in yaml.safe_load_all(out) if d}
+    code, _, err = recorder.interrupt()
+    assert code == 0, err
+    from mvpose_msgs.msg import Skeleton
+    from rclpy.serialization import deserialize_message
+
+    from mvpose_nodes.ros.conversions import joints_from_skeleton, stamp_ns
+    recorded = {}
+    for _, _, data in BagReader(record_to).messages():
+        message = deserialize_message(bytes(data), Skeleton)
+        recorded[stamp_ns(message.header)] = joints_from_skeleton(message)
+    return recorded, echoed
+
+
+def skeleton_stamp(echoed):
+    return echoed['header']['stamp']['sec'] * 10**9 + echoed['header']['stamp']['nanosec']
+
+
+def skeleton_joints(echoed):
+    return np.array([[joint['position'][axis] for axis in 'xyz'] for joint in echoed['joints']])
+
+
+@pytest.fixture(scope='module')
+def one_host_skeletons(graph_bag, tmp_path_factory):
+    """The split graph's launch files all on this host (loopback), as the reference."""
+    started = []
+
+    def start(host, *args):
+        started.append(Background(*args))
+        return started[-1]
+    try:
+        recorded, _ = run_split_graph(start, graph_bag, tmp_path_factory.mktemp('one_host') / 'skeletons')
+    finally:
+        for process in started:
+            process.kill()
+    assert len(recorded) == FRAME_SETS
+    return recorded
+
+
+@pytest.mark.timeout(420)
+@pytest.mark.parametrize('routed', [False, True], ids=['one subnet, multicast discovery',
+                                                       'routed subnets, ROS_STATIC_PEERS'])
+def test_the_graph_split_over_hosts_records_the_skeletons_of_one_host(routed, namespaces, graph_bag,
+                                                                       one_host_skeletons, tmp_path):
+    with VirtualNetwork(HOSTS, routed=routed) as network:
+        sent_before = {host: network.bytes_sent(host) for host in HOSTS}
+        recorded, echoed = run_split_graph(network.start, graph_bag, tmp_path / 'skeletons')
+        sent = {host: network.bytes_sent(host) - sent_before[host] for host in HOSTS}
+        code, doctor, err = network.start('fitting', 'doctor', '--bandwidth-time', 0).finish(timeout=60)
+        assert code == 0, err
+    # The doctor on the fitting host names each node's host by its address (its /diagnostics hardware_id).
+    for k in GRAPH_CAMERAS:
+        block = re.search(rf'^  host \w+: [^\n]*\({re.escape(network.addresses[f"cam{k}"])}\)\n((?:    .*\n)+)',
+                          doctor, re.MULTILINE)
+        assert block and f'/cam{k}/camera_features' in block.group(1).split(), doctor
+    assert re.search(r'^  host \w+ \(this host\): [^\n]*\n(?:    .*\n)*    /skeleton_fitter$', doctor, re.MULTILINE), doctor
+    assert 'ROS_STATIC_PEERS' in doctor and ('10.200.1.2;' in doctor) == routed, doctor
+    assert sorted(recorded) == sorted(one_host_skeletons) == sorted(echoed), (sorted(recorded), sorted(echoed))
+    for stamp, joints in recorded.items():
+        assert np.abs(joints - one_host_skeletons[stamp]).max() < 1e-3, stamp
+        assert np.abs(echoed[stamp] - joints).max() < 1e-6, stamp
+    # It crossed the links: the player's host sent the other cameras' images, the camera hosts their features.
+    assert sent[PLAYER_HOST] > 100_000 and all(sent[f'cam{k}'] > 10_000 for k in GRAPH_CAMERAS), sent
