@@ -115,14 +115,16 @@ class VirtualNetwork:
         ip('link', 'set', 'eth0', 'up' if up else 'down', namespace=self.namespaces[host])
 
     def cap_bandwidth(self, host, megabits_per_second):
-        """Limit what `host` sends to `megabits_per_second` (a token bucket, `tc qdisc ... tbf`; what it
-        cannot send within 50 ms waits, then is dropped); None lifts the limit."""
-        namespace = self.namespaces[host]
-        if megabits_per_second is None:
-            subprocess.run(['tc', '-n', namespace, 'qdisc', 'del', 'dev', 'eth0', 'root'], check=True)
-            return
-        subprocess.run(['tc', '-n', namespace, 'qdisc', 'add', 'dev', 'eth0', 'root', 'tbf',
-                        'rate', f'{megabits_per_second}mbit', 'burst', '64kb', 'latency', '50ms'], check=True)
+        """Limit what `host` sends and receives to `megabits_per_second` each way (a token bucket, `tc qdisc
+        ... tbf`, on both ends of its link; what cannot be sent within 100 ms waits, then is dropped); None
+        lifts the limit."""
+        port = f'port{self.hosts.index(host) + 1}'
+        for namespace, interface in ((self.namespaces[host], 'eth0'), (self.hub, port)):
+            command = ['tc', '-n', namespace, 'qdisc', 'del' if megabits_per_second is None else 'add', 'dev',
+                       interface, 'root']
+            if megabits_per_second is not None:
+                command += ['tbf', 'rate', f'{megabits_per_second}mbit', 'burst', '32kb', 'latency', '100ms']
+            subprocess.run(command, check=True)
 
     def bytes_sent(self, host):
         """Bytes `host` has sent on its link so far."""
