@@ -554,7 +554,7 @@ def test_the_eight_camera_and_the_host_launch_files(capsys):
     assert main([str(LAUNCH_DIR / 'camera_host.launch.yaml'), 'camera:=4', '--dry-run']) == 0
     assert shlex.split(capsys.readouterr().out)[0] == '[/cam4/camera_features]'
     assert main([str(LAUNCH_DIR / 'fitting_host.launch.yaml'), 'cameras:=[2, 6]', '--dry-run']) == 0
-    assert shlex.split(capsys.readouterr().out)[-2:] == ['-p', 'cameras:=[2, 6]']
+    assert shlex.split(capsys.readouterr().out)[-4:] == ['-p', 'cameras:=[2, 6]', '-p', 'camera_timeout:=1.0']
     for file_name, arguments in (('camera_host.launch.yaml', {'camera': '3'}), ('fitting_host.launch.yaml', {})):
         assert [spec.respawn for spec in load_launch_file(LAUNCH_DIR / file_name, arguments)] == [True]
 
