@@ -45,10 +45,11 @@ def ip(*args, namespace=None):
 
 class VirtualNetwork:
     """`hosts` (names) in namespaces of their own, each with one interface `eth0` to the switch (switched)
-    or the router (routed); a context manager that removes it all on exit, processes included."""
+    or the router (routed), except those `unplugged`; a context manager that removes it all on exit,
+    processes included. link() joins two hosts directly by a second network."""
 
-    def __init__(self, hosts, routed=False):
-        self.hosts, self.routed = list(hosts), routed
+    def __init__(self, hosts, routed=False, unplugged=()):
+        self.hosts, self.routed, self.unplugged = list(hosts), routed, set(unplugged)
         tag = f'mv{os.getpid() % 100000}'
         self.namespaces = {host: f'{tag}{host}' for host in self.hosts}
         self.hub = f'{tag}{"router" if routed else "switch"}'
@@ -79,6 +80,9 @@ class VirtualNetwork:
             namespace, port = self.namespaces[host], f'port{i + 1}'
             ip('netns', 'add', namespace)
             self._sysctl(namespace, 'net.ipv6.conf.all.disable_ipv6', 1)   # IPv4 only, as DDS uses here
+            ip('link', 'set', 'lo', 'up', namespace=namespace)
+            if host in self.unplugged:
+                continue
             ip('link', 'add', port, 'type', 'veth', 'peer', 'name', 'eth0', 'netns', namespace, namespace=self.hub)
             if self.routed:
                 ip('addr', 'add', f'{SUBNET}.{i + 1}.1/24', 'dev', port, namespace=self.hub)
@@ -86,10 +90,20 @@ class VirtualNetwork:
                 ip('link', 'set', port, 'master', 'br0', namespace=self.hub)
             ip('link', 'set', port, 'up', namespace=self.hub)
             ip('addr', 'add', f'{self.addresses[host]}/24', 'dev', 'eth0', namespace=namespace)
-            for interface in ('lo', 'eth0'):
-                ip('link', 'set', interface, 'up', namespace=namespace)
+            ip('link', 'set', 'eth0', 'up', namespace=namespace)
             if self.routed:
                 ip('route', 'add', 'default', 'via', f'{SUBNET}.{i + 1}.1', namespace=namespace)
+
+    def link(self, first, second):
+        """A second network: `first` and `second` joined directly (interface eth1 each) on 10.201.0.0/24,
+        `first` at .1 and `second` at .2; returns their addresses."""
+        addresses = ('10.201.0.1', '10.201.0.2')
+        ip('link', 'add', 'eth1', 'type', 'veth', 'peer', 'name', 'eth1', 'netns', self.namespaces[second],
+           namespace=self.namespaces[first])
+        for host, address in zip((first, second), addresses):
+            ip('addr', 'add', f'{address}/24', 'dev', 'eth1', namespace=self.namespaces[host])
+            ip('link', 'set', 'eth1', 'up', namespace=self.namespaces[host])
+        return addresses
 
     @staticmethod
     def _sysctl(namespace, key, value):
@@ -103,10 +117,11 @@ class VirtualNetwork:
         peers = ';'.join(address for other, address in self.addresses.items() if other != host)
         return {'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST', 'ROS_STATIC_PEERS': peers}
 
-    def start(self, host, *args):
-        """`./mvpose ARGS` on `host` in the background (a common.Background), with its discovery settings."""
+    def start(self, host, *args, environment=None):
+        """`./mvpose ARGS` on `host` in the background (a common.Background), with its discovery settings
+        and `environment` on top."""
         process = Background(*args, prefix=('ip', 'netns', 'exec', self.namespaces[host]),
-                             environment=self.environment(host))
+                             environment={**self.environment(host), **(environment or {})})
         self.processes.append(process)
         return process
 

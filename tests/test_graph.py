@@ -34,6 +34,18 @@ def test_bench_runs_every_frame_set_through_the_graph(synth_bag):
     assert '[bench]' in result.stderr       # the progress bar
 
 
+@pytest.mark.timeout(240)
+def test_bench_runs_the_eight_camera_graph(synth_bag):
+    """Issue 16: `bench --all-cameras` runs launch/mvpose8.launch.yaml (eight camera_features nodes, the fitter
+    with all 8) and every frame set is fitted."""
+    bag = synth_bag('--cameras', *range(1, 9), '--frames', '70-72', '--resolution', '960x540')
+    table = run_mvpose('bench', bag, '--all-cameras', '--window', 1, timeout=200).stdout
+    assert '(3 frame sets, cameras 1 2 3 4 5 6 7 8, 960×540, window 1)' in table
+    assert '3 of 3 fitted, none dropped' in table
+    for k in range(1, 9):
+        assert re.search(rf'^    /cam{k}/camera_features\s+[\d.]+\s+\d+\s+\d+$', table, re.MULTILINE), table
+
+
 @pytest.mark.timeout(120)
 def test_bench_transport_sends_a_cameras_messages_through_an_echo(synth_bag):
     """`bench --transport`: every message of camera 3 crosses DDS to the echo process and its header comes

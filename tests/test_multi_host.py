@@ -4,13 +4,14 @@ the recorder and an echo on a fitting host, started with the launch files a real
 (camera_host.launch.yaml, fitting_host.launch.yaml). Discovery by multicast on one switched subnet, or
 without multicast through ROS_STATIC_PEERS across routed subnets; the skeletons the fitting host records
 are those of the same launch files on one host."""
+import os
 import re
 import time
 
 import numpy as np
 import pytest
 import yaml
-from common import GRAPH_CAMERAS, GRAPH_INPUTS, Background, run_mvpose
+from common import GRAPH_CAMERAS, GRAPH_INPUTS, ROOT, Background, run_mvpose
 from network import VirtualNetwork, unavailable
 
 from mvpose_msgs.msg import Skeleton
@@ -176,3 +177,38 @@ def test_a_camera_hosts_link_fault_degrades_the_fit_and_it_recovers(fault, names
     if fault is not no_fault:
         assert Skeleton.STATUS_DEGRADED in statuses, statuses
     assert Skeleton.STATUS_DEGRADED not in statuses[-5:] and len(statuses) >= 20, statuses   # camera 5 used again
+
+
+CAPTURE_PROFILE = ROOT / 'ros_ws' / 'src' / 'mvpose_nodes' / 'config' / 'fastdds_capture_network.xml'
+PLACEHOLDER_ADDRESS = '<address>192.168.50.10</address>'
+
+
+@pytest.mark.timeout(240)
+def test_only_the_capture_network_and_domain_see_the_graph(namespaces, tmp_path):
+    """Isolation without DDS-Security (issue 16): a camera host on the capture switch and, by a second
+    link, on an office network. With the default profile the office host sees its topic; with
+    config/fastdds_capture_network.xml (its capture address allow-listed) it does not, while a host on the
+    capture network with the same ROS_DOMAIN_ID still does and one with another domain does not."""
+    with VirtualNetwork(['camera', 'fitting', 'stranger', 'office'], unplugged=['office']) as network:
+        camera_address, _ = network.link('camera', 'office')
+        profile = tmp_path / 'capture_network.xml'
+        text = CAPTURE_PROFILE.read_text()
+        assert PLACEHOLDER_ADDRESS in text
+        profile.write_text(text.replace(PLACEHOLDER_ADDRESS, f'<address>{network.addresses["camera"]}</address>'))
+        other_domain = {'ROS_DOMAIN_ID': str((int(os.environ['ROS_DOMAIN_ID']) + 1) % 102)}
+
+        def heard(host, environment=None, timeout=10):
+            echo = network.start(host, 'topic', 'echo', '/isolation', '--once', '--timeout', timeout,
+                                 environment=environment)
+            code, out, _ = echo.finish(timeout=timeout + 30)
+            return code == 0 and 'data: on the capture network' in out
+
+        for profile_file, office_hears in ((None, True), (profile, False)):
+            publisher = network.start('camera', 'topic', 'pub', '/isolation', 'std_msgs/msg/String',
+                                      '{data: on the capture network}', '--rate', 4,
+                                      environment={'FASTRTPS_DEFAULT_PROFILES_FILE': str(profile_file)}
+                                      if profile_file else None)
+            assert heard('fitting'), profile_file
+            assert heard('office') == office_hears, profile_file
+            assert not heard('stranger', other_domain), profile_file
+            publisher.interrupt()

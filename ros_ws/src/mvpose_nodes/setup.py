@@ -31,7 +31,7 @@ setup(
     data_files=[
         ('share/ament_index/resource_index/packages', [f'resource/{PACKAGE}']),
         (f'share/{PACKAGE}', ['package.xml']),
-        (f'share/{PACKAGE}/config', glob('config/*.yaml') + glob('config/fastdds.xml')),
+        (f'share/{PACKAGE}/config', glob('config/*.yaml') + glob('config/*.xml')),
         (f'share/{PACKAGE}/launch', glob('launch/*.launch.yaml')),  # for `ros2 launch mvpose_nodes FILE`
         (f'share/{PACKAGE}/data', glob('data/*.npz')),
     ],

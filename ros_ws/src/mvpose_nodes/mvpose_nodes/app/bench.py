@@ -49,6 +49,7 @@ from pathlib import Path
 
 import numpy as np
 
+from mvpose_nodes.app.graph_run import ALL_CAMERAS, GRAPH_CAMERAS
 from mvpose_nodes.app.reports.benchmark import (STALL_TIMEOUT, BenchResult, SoakSample, cpu_split, format_soak,
                                                 format_table, median_p95, node_usage, resident_mib, sample_process)
 from mvpose_nodes.tools.cli import ArgumentParser, UserError, exit_on_user_error
@@ -150,9 +151,10 @@ def decode_times(frame_sets):
     return times, shape
 
 
-def run_bench(bag, window, rate, limit, log_path, total=None, sample_every=None):
-    """The bench run (the module's docstring); with `total`, that many frame sets (LoopedFrameSets), and
-    with `sample_every`, a SoakSample in result.samples each time that many more frame sets are answered."""
+def run_bench(bag, window, rate, limit, log_path, total=None, sample_every=None, cameras=GRAPH_CAMERAS):
+    """The bench run (the module's docstring) of the graph of `cameras` (graph_run.launch_file); with `total`,
+    that many frame sets (LoopedFrameSets), and with `sample_every`, a SoakSample in result.samples each time
+    that many more frame sets are answered."""
     import rclpy
     from diagnostic_msgs.msg import DiagnosticArray
     from rclpy.qos import QoSProfile, ReliabilityPolicy
@@ -162,14 +164,14 @@ def run_bench(bag, window, rate, limit, log_path, total=None, sample_every=None)
     from mvpose_nodes.tools.bag import wait_for_subscribers
     from mvpose_nodes.app.fit import skeletons
     from mvpose_nodes.ros.camera_bag import GROUND_TRUTH_TOPIC, SKELETON_TOPIC
-    from mvpose_nodes.app.graph_run import GRAPH_CAMERAS, wait_for_connections, launch_file
+    from mvpose_nodes.app.graph_run import wait_for_connections, launch_file
     from mvpose_nodes.tools.launch import Launch, load_launch_file
     from mvpose_nodes.app.progress import Progress
     from mvpose_nodes.ros.conversions import joints_from_skeleton, stamp_ns
     from mvpose_nodes.ros.diagnostics import DIAGNOSTICS_TOPIC, stage_cpu
     from mvpose_nodes.ros.helpers import LATCHED, StopSignal, wait_for_acknowledgements
 
-    cameras = tuple(GRAPH_CAMERAS)
+    cameras = tuple(cameras)
     calibration, frame_sets = load_frame_sets(bag, cameras, limit)
     truth = {}
     if rate is not None:   # open loop: the fitted frame sets' error against the bag's truth, if it has one
@@ -187,7 +189,7 @@ def run_bench(bag, window, rate, limit, log_path, total=None, sample_every=None)
     log_path = Path(log_path)
     log_path.parent.mkdir(parents=True, exist_ok=True)
     with open(log_path, 'w') as log, StopSignal() as stop:
-        launch = Launch(load_launch_file(launch_file()), output=log)
+        launch = Launch(load_launch_file(launch_file(cameras)), output=log)
         node = rclpy.create_node('mvpose_bench')
         answered = {}      # stamp -> 'fitted' | 'unfitted' | 'passed over' | 'dropped'
         statuses = {}      # stamp -> {camera: LabelledContour status}
@@ -243,7 +245,7 @@ def run_bench(bag, window, rate, limit, log_path, total=None, sample_every=None)
             pids = launch.pids()
             pids['bench (this process)'] = os.getpid()
             print(f'[bench] starting the graph (log: {log_path})', file=sys.stderr, flush=True)
-            wait_for_connections(node, launch, stop, log_path)
+            wait_for_connections(node, launch, stop, log_path, cameras)
             result.connected = time.monotonic()
             wait_for_subscribers(node, {**{f'/cam{k}/image_raw/compressed': p for k, p in image_publishers.items()},
                                         **calibration_publishers}, SUBSCRIBER_TIMEOUT, stop)
@@ -347,7 +349,6 @@ def camera_messages(bag, camera):
 
 
 def run_transport(bag):
-    from mvpose_nodes.app.graph_run import GRAPH_CAMERAS
     from mvpose_nodes.ros.helpers import StopSignal
     from mvpose_nodes.tools.transport import format_transport, measure
     messages = camera_messages(bag, GRAPH_CAMERAS[0])
@@ -367,6 +368,9 @@ def main(argv=None, prog='bench'):
                         help="open loop: send each frame set at its time in the bag / R (1.0: the bag's own speed), "
                              'whatever the graph does (default: closed loop, --window)')
     parser.add_argument('--frames', type=int, help='use only the first N frame sets (default all)')
+    parser.add_argument('--all-cameras', action='store_true',
+                        help='the graph of all 8 cameras (launch/mvpose8.launch.yaml) on a bag that has them, '
+                             'instead of cameras 3, 5, 7')
     parser.add_argument('--transport', action='store_true',
                         help="instead of running the graph: size, serialisation and DDS round trip of a camera's "
                              'messages (image in; silhouette raw and PNG, contour, ellipses out)')
@@ -390,7 +394,8 @@ def main(argv=None, prog='bench'):
         if args.transport:
             print(run_transport(bag), flush=True)
             return 0
-        result = run_bench(bag, args.window, args.rate, args.frames, root / 'output' / 'bench' / 'graph.log')
+        result = run_bench(bag, args.window, args.rate, args.frames, root / 'output' / 'bench' / 'graph.log',
+                           cameras=ALL_CAMERAS if args.all_cameras else GRAPH_CAMERAS)
         if bag.is_relative_to(root):
             result.bag = str(bag.relative_to(root))
         print(format_table(result), flush=True)

@@ -16,6 +16,7 @@ from mvpose_nodes.tools.cli import UserError
 
 FEATURE_TOPICS = ('skin_ellipses', 'labelled_contour')   # the fitter's inputs
 GRAPH_CAMERAS = (3, 5, 7)        # the defaults of launch/mvpose.launch.yaml
+ALL_CAMERAS = tuple(range(1, 9))  # launch/mvpose8.launch.yaml's
 CONNECT_TIMEOUT = 60.0           # [s] for every node to start and every topic to connect
 QUIET_AFTER_PLAYBACK = 10.0      # [s] of no new skeleton after playback ends: the graph is done
 
@@ -32,10 +33,12 @@ class GraphRun:
     log: Path = None
 
 
-def launch_file():
-    """launch/mvpose.launch.yaml of the checkout that runs (its default cameras are GRAPH_CAMERAS)."""
+def launch_file(cameras=GRAPH_CAMERAS):
+    """The launch file of the checkout that runs with a node for each of `cameras`: launch/mvpose.launch.yaml
+    (its defaults, GRAPH_CAMERAS) or launch/mvpose8.launch.yaml (ALL_CAMERAS)."""
     from mvpose_nodes.app.main import repository_root
-    return repository_root() / 'ros_ws' / 'src' / 'mvpose_nodes' / 'launch' / 'mvpose.launch.yaml'
+    name = {GRAPH_CAMERAS: 'mvpose.launch.yaml', ALL_CAMERAS: 'mvpose8.launch.yaml'}[tuple(cameras)]
+    return repository_root() / 'ros_ws' / 'src' / 'mvpose_nodes' / 'launch' / name
 
 
 def run_graph(bag, log_path, rate=1.0, on_skeleton=None):
@@ -107,12 +110,12 @@ def run_graph(bag, log_path, rate=1.0, on_skeleton=None):
     return run
 
 
-def wait_for_connections(node, launch, stop, log):
-    """Until every camera's feature topics and /mvpose/skeleton have their publishers and subscribers
+def wait_for_connections(node, launch, stop, log, cameras=GRAPH_CAMERAS):
+    """Until the feature topics of every one of `cameras` and /mvpose/skeleton have their publishers and subscribers
     (the player waits for its own subscribers only, not for the nodes downstream of them); UserError
     naming `log` (the nodes' log) when a node stops or the graph does not connect."""
     import rclpy
-    topics = [f'/cam{k}/{name}' for k in GRAPH_CAMERAS for name in FEATURE_TOPICS]
+    topics = [f'/cam{k}/{name}' for k in cameras for name in FEATURE_TOPICS]
     deadline = time.monotonic() + CONNECT_TIMEOUT
     while not stop.stopped:
         if all(node.count_publishers(t) and node.count_subscribers(t) for t in topics) and \

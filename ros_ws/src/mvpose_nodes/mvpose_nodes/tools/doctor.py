@@ -6,7 +6,6 @@ Hosts: Fast DDS puts a host id in each participant's GUID prefix (bytes 2-3, fro
 the endpoints rclpy lists say which nodes share a host; an mvpose node also names its host and addresses in
 its /diagnostics status (hardware_id), which gives the host id a name."""
 import collections
-import math
 import os
 import sys
 import time
@@ -14,6 +13,7 @@ from pathlib import Path
 
 from mvpose_nodes.tools.cli import ArgumentParser, UserError, exit_on_user_error
 from mvpose_nodes.io.interfaces import message_class
+from mvpose_nodes.tools.topic import human_bytes
 
 DISCOVERY_TIME = 2.0   # [s]: a few of the 0.25 s announcements of config/fastdds.xml, and a /diagnostics period
 BANDWIDTH_TIME = 3.0   # [s]
@@ -78,8 +78,7 @@ def report(args):
     import rclpy
     from diagnostic_msgs.msg import DiagnosticArray
     from mvpose_nodes.ros.diagnostics import DIAGNOSTICS_TOPIC, host_addresses
-    from mvpose_nodes.ros.helpers import StopSignal, subscription_qos_for
-    from mvpose_nodes.tools.topic import human_bytes
+    from mvpose_nodes.ros.helpers import StopSignal
     with StopSignal() as stop:
         node = rclpy.create_node('mvpose_doctor')
         hardware = {}   # fully qualified node name -> its DiagnosticStatus.hardware_id
@@ -95,19 +94,8 @@ def report(args):
         addresses = ', '.join(f'{name} {address}' for name, address in host_addresses().items())
         print(f'\nThis host: DDS host id {this_host}, {addresses}')
 
-        topics = dict((name, types[0]) for name, types in node.get_topic_names_and_types() if types)
-        def others(infos):
-            return [info for info in infos if (info.node_namespace, info.node_name) != ('/', node.get_name())]
-        endpoints = {topic: (others(node.get_publishers_info_by_topic(topic)),
-                             others(node.get_subscriptions_info_by_topic(topic))) for topic in topics}
-        hosts = collections.defaultdict(set)   # host id -> fully qualified node names
-        node_host = {}
-        for publishers, subscriptions in endpoints.values():
-            for info in (*publishers, *subscriptions):
-                name = f'{info.node_namespace.rstrip("/")}/{info.node_name}'
-                hosts[host_of(info.endpoint_gid)].add(name)
-                node_host[name] = host_of(info.endpoint_gid)
-        print(f'\nNodes ({len(node_host)}) by host')
+        topics, endpoints, hosts = graph_of_others(node)
+        print(f'\nNodes ({sum(map(len, hosts.values()))}) by host')
         for host, names in sorted(hosts.items()):
             named = sorted({hardware[n] for n in names if n in hardware})
             print(f'  host {host}{" (this host)" if host == this_host else ""}'
@@ -115,27 +103,46 @@ def report(args):
             for name in sorted(names):
                 print(f'    {name}')
 
-        sizes = {topic: [] for topic in topics}
-        if args.bandwidth_time:
-            for topic, type_name in topics.items():
-                node.create_subscription(message_class(type_name), topic,
-                                         lambda data, t=topic: sizes[t].append(len(data)),
-                                         subscription_qos_for(node, topic), raw=True)
-            spin(node, args.bandwidth_time, stop)
+        sizes = measure_sizes(node, topics, args.bandwidth_time, stop)
         print(f'\nTopics ({len(topics)}): publishers and subscribers (their hosts)'
               + (f', and over {args.bandwidth_time:g} s the rate and bandwidth this host received'
                  if args.bandwidth_time else ''))
-        seconds = args.bandwidth_time or math.nan
         for topic, type_name in sorted(topics.items()):
-            publishers, subscriptions = endpoints[topic]
             where = ' / '.join(f'{len(ends)} {kind} ({", ".join(sorted({host_of(e.endpoint_gid) for e in ends}))})'
-                               if ends else f'0 {kind}' for ends, kind in ((publishers, 'pub'),
-                                                                           (subscriptions, 'sub')))
-            measured = (f'{len(sizes[topic]) / seconds:6.1f} Hz {human_bytes(sum(sizes[topic]) / seconds):>9s}/s'
-                        if args.bandwidth_time else '')
+                               if ends else f'0 {kind}' for ends, kind in zip(endpoints[topic], ('pub', 'sub')))
+            measured = (f'{len(sizes[topic]) / args.bandwidth_time:6.1f} Hz '
+                        f'{human_bytes(sum(sizes[topic]) / args.bandwidth_time):>9s}/s' if args.bandwidth_time else '')
             print(f'  {topic:36s} {type_name:38s} {where:34s} {measured}')
         node.destroy_node()
     return 130 if stop.stopped else 0
+
+
+def graph_of_others(node):
+    """What `node` sees of the graph but itself: {topic: type}, {topic: (publishers, subscriptions)} (rclpy
+    TopicEndpointInfo lists) and {host id: fully qualified node names}."""
+    def others(infos):
+        return [info for info in infos if (info.node_namespace, info.node_name) != ('/', node.get_name())]
+    topics = {name: types[0] for name, types in node.get_topic_names_and_types() if types}
+    endpoints = {topic: (others(node.get_publishers_info_by_topic(topic)),
+                         others(node.get_subscriptions_info_by_topic(topic))) for topic in topics}
+    hosts = collections.defaultdict(set)
+    for publishers, subscriptions in endpoints.values():
+        for info in (*publishers, *subscriptions):
+            hosts[host_of(info.endpoint_gid)].add(f'{info.node_namespace.rstrip("/")}/{info.node_name}')
+    return topics, endpoints, hosts
+
+
+def measure_sizes(node, topics, seconds, stop):
+    """{topic: [serialised size [bytes] of each message received]} over `seconds`, subscribed to every one of
+    `topics` ({topic: type}) with a QoS its publishers match (nothing subscribed when seconds is 0)."""
+    from mvpose_nodes.ros.helpers import subscription_qos_for
+    sizes = {topic: [] for topic in topics}
+    if seconds:
+        for topic, type_name in topics.items():
+            node.create_subscription(message_class(type_name), topic, lambda data, t=topic: sizes[t].append(len(data)),
+                                     subscription_qos_for(node, topic), raw=True)
+        spin(node, seconds, stop)
+    return sizes
 
 
 def spin(node, seconds, stop):
