@@ -8,7 +8,8 @@ Two layouts:
 - routed: every host on a subnet of its own (10.200.N.0/24) behind a router that forwards unicast and no
   multicast, as separate networks are; DDS finds the others only through ROS_STATIC_PEERS.
 
-Needs root (CAP_NET_ADMIN) and iproute2's `ip`; `unavailable()` says why not where they are missing."""
+Needs root (CAP_NET_ADMIN) and iproute2's `ip`; `unavailable()` says why not where they are missing.
+drop_randomly() needs `iptables` too."""
 import json
 import os
 import shutil
@@ -140,6 +141,15 @@ class VirtualNetwork:
             if megabits_per_second is not None:
                 command += ['tbf', 'rate', f'{megabits_per_second}mbit', 'burst', '32kb', 'latency', '100ms']
             subprocess.run(command, check=True)
+
+    def drop_randomly(self, host, probability):
+        """Lose each IPv4 packet `host` receives or sends with `probability` (iptables' statistic match, as
+        `tc netem` is not in every kernel); None ends it."""
+        namespace = self.namespaces[host]
+        for chain in ('INPUT', 'OUTPUT'):
+            rule = ['-m', 'statistic', '--mode', 'random', '--probability', str(probability), '-j', 'DROP']
+            subprocess.run(['ip', 'netns', 'exec', namespace, 'iptables', '-F' if probability is None else '-A',
+                            chain, *(rule if probability is not None else [])], check=True)
 
     def bytes_sent(self, host):
         """Bytes `host` has sent on its link so far."""

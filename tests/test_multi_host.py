@@ -6,6 +6,7 @@ without multicast through ROS_STATIC_PEERS across routed subnets; the skeletons 
 are those of the same launch files on one host."""
 import os
 import re
+import shutil
 import time
 
 import numpy as np
@@ -144,8 +145,19 @@ def bandwidth_capped_for_two_seconds(network):
     network.cap_bandwidth(FAULTY_HOST, None)
 
 
+def one_percent_of_packets_lost_for_two_seconds(network):
+    """Each way; a 960×540 JPEG crosses as one UDP datagram of about 35 IP fragments, so about 30 % of the
+    images need sending again."""
+    if shutil.which('iptables') is None:
+        pytest.skip('random loss needs iptables (its statistic match; this kernel has no netem)')
+    network.drop_randomly(FAULTY_HOST, 0.01)
+    time.sleep(2.0)
+    network.drop_randomly(FAULTY_HOST, None)
+
+
 @pytest.mark.timeout(300)
-@pytest.mark.parametrize('fault', [no_fault, link_down_for_two_seconds, bandwidth_capped_for_two_seconds],
+@pytest.mark.parametrize('fault', [no_fault, link_down_for_two_seconds, bandwidth_capped_for_two_seconds,
+                                   one_percent_of_packets_lost_for_two_seconds],
                          ids=lambda fault: fault.__name__.replace('_', ' '))
 def test_a_camera_hosts_link_fault_degrades_the_fit_and_it_recovers(fault, namespaces, longer_bag, tmp_path):
     """A fault on camera 5's host link for 2 s, 1 s into the bag played at half its speed: the fitter goes on
@@ -174,7 +186,7 @@ def test_a_camera_hosts_link_fault_degrades_the_fit_and_it_recovers(fault, names
     statuses = [int(line) for line in statuses.split()]
     evaluation = run_mvpose('eval', tmp_path / 'skeletons', '--truth', longer_bag, timeout=120).stdout
     print(f'\n{fault.__name__}: {len(statuses)} skeletons, statuses {statuses}\n{evaluation}')
-    if fault is not no_fault:
+    if fault in (link_down_for_two_seconds, bandwidth_capped_for_two_seconds):
         assert Skeleton.STATUS_DEGRADED in statuses, statuses
     assert Skeleton.STATUS_DEGRADED not in statuses[-5:] and len(statuses) >= 20, statuses   # camera 5 used again
 
