@@ -13,6 +13,7 @@ drop_randomly() needs `iptables` too."""
 import json
 import os
 import shutil
+import signal
 import subprocess
 import time
 
@@ -55,7 +56,7 @@ class VirtualNetwork:
         self.namespaces = {host: f'{tag}{host}' for host in self.hosts}
         self.hub = f'{tag}{"router" if routed else "switch"}'
         self.addresses = {host: (f'{SUBNET}.{i + 1}.2' if routed else f'{SUBNET}.0.{i + 1}')
-                          for i, host in enumerate(self.hosts)}
+                          for i, host in enumerate(self.hosts) if host not in self.unplugged}
         self.processes = []
 
     def __enter__(self):
@@ -97,14 +98,12 @@ class VirtualNetwork:
 
     def link(self, first, second):
         """A second network: `first` and `second` joined directly (interface eth1 each) on 10.201.0.0/24,
-        `first` at .1 and `second` at .2; returns their addresses."""
-        addresses = ('10.201.0.1', '10.201.0.2')
+        `first` at .1 and `second` at .2."""
         ip('link', 'add', 'eth1', 'type', 'veth', 'peer', 'name', 'eth1', 'netns', self.namespaces[second],
            namespace=self.namespaces[first])
-        for host, address in zip((first, second), addresses):
+        for host, address in ((first, '10.201.0.1'), (second, '10.201.0.2')):
             ip('addr', 'add', f'{address}/24', 'dev', 'eth1', namespace=self.namespaces[host])
             ip('link', 'set', 'eth1', 'up', namespace=self.namespaces[host])
-        return addresses
 
     @staticmethod
     def _sysctl(namespace, key, value):
@@ -145,11 +144,13 @@ class VirtualNetwork:
     def drop_randomly(self, host, probability):
         """Lose each IPv4 packet `host` receives or sends with `probability` (iptables' statistic match, as
         `tc netem` is not in every kernel); None ends it."""
-        namespace = self.namespaces[host]
+        iptables = ['ip', 'netns', 'exec', self.namespaces[host], 'iptables']
         for chain in ('INPUT', 'OUTPUT'):
-            rule = ['-m', 'statistic', '--mode', 'random', '--probability', str(probability), '-j', 'DROP']
-            subprocess.run(['ip', 'netns', 'exec', namespace, 'iptables', '-F' if probability is None else '-A',
-                            chain, *(rule if probability is not None else [])], check=True)
+            if probability is None:
+                subprocess.run([*iptables, '-F', chain], check=True)
+            else:
+                subprocess.run([*iptables, '-A', chain, '-m', 'statistic', '--mode', 'random', '--probability',
+                                str(probability), '-j', 'DROP'], check=True)
 
     def bytes_sent(self, host):
         """Bytes `host` has sent on its link so far."""
@@ -165,7 +166,7 @@ class VirtualNetwork:
             left = subprocess.run(['ip', 'netns', 'pids', namespace], capture_output=True, text=True).stdout.split()
             for pid in left:
                 try:
-                    os.kill(int(pid), 9)
+                    os.kill(int(pid), signal.SIGKILL)
                 except ProcessLookupError:
                     pass
             if left:

@@ -3,7 +3,8 @@ camera_features node on each of three camera hosts (the player beside camera 3's
 the recorder and an echo on a fitting host, started with the launch files a real split uses
 (camera_host.launch.yaml, fitting_host.launch.yaml). Discovery by multicast on one switched subnet, or
 without multicast through ROS_STATIC_PEERS across routed subnets; the skeletons the fitting host records
-are those of the same launch files on one host."""
+are those of the same launch files on one host. Then faults on a camera host's link (down, bandwidth
+capped, packets lost), and the isolation a Fast DDS interface allow-list and the domain ID give."""
 import os
 import re
 import shutil
@@ -13,11 +14,12 @@ import numpy as np
 import pytest
 import yaml
 from common import GRAPH_CAMERAS, GRAPH_INPUTS, ROOT, Background, run_mvpose
-from network import VirtualNetwork, unavailable
-
 from mvpose_msgs.msg import Skeleton
+from network import VirtualNetwork, unavailable
+from rclpy.serialization import deserialize_message
 
 from mvpose_nodes.io.bagfile import BagReader
+from mvpose_nodes.ros.conversions import joints_from_skeleton, stamp_ns
 
 pytestmark = pytest.mark.graph
 
@@ -57,10 +59,6 @@ def run_split_graph(start, bag, record_to):
     echoed = {skeleton_stamp(d): skeleton_joints(d) for d in yaml.safe_load_all(out) if d}
     code, _, err = recorder.interrupt()
     assert code == 0, err
-    from mvpose_msgs.msg import Skeleton
-    from rclpy.serialization import deserialize_message
-
-    from mvpose_nodes.ros.conversions import joints_from_skeleton, stamp_ns
     recorded = {}
     for _, _, data in BagReader(record_to).messages():
         message = deserialize_message(bytes(data), Skeleton)
@@ -202,7 +200,7 @@ def test_only_the_capture_network_and_domain_see_the_graph(namespaces, tmp_path)
     config/fastdds_capture_network.xml (its capture address allow-listed) it does not, while a host on the
     capture network with the same ROS_DOMAIN_ID still does and one with another domain does not."""
     with VirtualNetwork(['camera', 'fitting', 'stranger', 'office'], unplugged=['office']) as network:
-        camera_address, _ = network.link('camera', 'office')
+        network.link('camera', 'office')
         profile = tmp_path / 'capture_network.xml'
         text = CAPTURE_PROFILE.read_text()
         assert PLACEHOLDER_ADDRESS in text

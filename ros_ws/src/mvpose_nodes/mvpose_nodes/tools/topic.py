@@ -187,10 +187,10 @@ def hz(args):
 
 def bw(args):
     def report(received):
-        if len(received) < 2:
+        seconds = received[-1][0] - received[0][0] if len(received) > 1 else 0.0
+        if seconds <= 0:
             return 'no new messages'
         sizes = [size for _, size in received]
-        seconds = received[-1][0] - received[0][0]
         return (f'{human_bytes(sum(sizes[1:]) / seconds)}/s from {len(sizes)} messages\n\tMessage size mean: '
                 f'{human_bytes(sum(sizes) / len(sizes))} min: {human_bytes(min(sizes))} max: {human_bytes(max(sizes))}')
     return measure(args, 'mvpose_topic_bw', report, args.window)
