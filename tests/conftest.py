@@ -13,11 +13,15 @@ synth_bag (./mvpose synth bags made once per session), cmu_walk (the CMU walk lo
 helpers are in common.py."""
 import ast
 import configparser
+import contextlib
+import ctypes
 import importlib.abc
 import os
 import re
+import signal
 import stat
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -121,6 +125,67 @@ def pytest_terminal_summary(terminalreporter):
         names = ', '.join(f'{name} ({"/".join(sorted(tiers))})' for name, tiers in LEFT_OUT)
         terminalreporter.write_line(f'Not run through ./mvpose test (MVPOSE_ROOT unset), so without ROS: the pure '
                                     f'tier only; left out: {names}. `./mvpose test` runs every tier.', yellow=True)
+
+
+# ---- no process outlives its test ---------------------------------------------------------------
+
+PR_SET_CHILD_SUBREAPER = 36   # linux/prctl.h: orphaned descendants are re-parented to this process
+LEFTOVER_GRACE = 5.0          # [s] for a test's processes to finish ending after it
+
+
+def living_children():
+    """{pid: command line} of this process's children that are not zombies (with the test process a child
+    subreaper, that includes every orphaned descendant of a test: a pool worker whose parent was killed)."""
+    children = {}
+    for entry in os.listdir('/proc'):
+        if not entry.isdigit():
+            continue
+        try:
+            stat_fields = Path(f'/proc/{entry}/stat').read_text().rsplit(')', 1)[1].split()
+            command = Path(f'/proc/{entry}/cmdline').read_bytes().replace(b'\0', b' ').decode(errors='replace')
+        except OSError:   # ended meanwhile
+            continue
+        state, parent = stat_fields[0], int(stat_fields[1])
+        if parent == os.getpid() and state != 'Z':
+            children[int(entry)] = command.strip()
+    return children
+
+
+def pytest_sessionstart(session):
+    ctypes.CDLL(None, use_errno=True).prctl(PR_SET_CHILD_SUBREAPER, 1, 0, 0, 0)
+
+
+@pytest.fixture(autouse=True)
+def no_process_left_behind(request):
+    """Fails a test (as an error in its teardown) that leaves a process running after it and its fixtures
+    ended (issue 17), naming the processes, and kills them so that the tests after it run clean."""
+    before = living_children()
+    yield
+    deadline = time.monotonic() + LEFTOVER_GRACE
+    while (left := {pid: command for pid, command in living_children().items() if pid not in before}) \
+            and time.monotonic() < deadline:
+        time.sleep(0.1)
+    for pid in left:
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(pid, signal.SIGKILL)
+    if left:
+        pytest.fail(f'{request.node.nodeid} left {len(left)} process(es) running: '
+                    + '; '.join(f'{pid} {command}' for pid, command in sorted(left.items())), pytrace=False)
+
+
+def pytest_sessionfinish(session):
+    """The whole run fails if a process started by it (or orphaned by one it started) still runs."""
+    left = living_children()
+    for pid in left:
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(pid, signal.SIGKILL)
+    with contextlib.suppress(ChildProcessError):
+        while os.waitpid(-1, os.WNOHANG)[0]:   # the zombies of orphans re-parented here
+            pass
+    if left:
+        session.exitstatus = pytest.ExitCode.TESTS_FAILED
+        print(f'\n{len(left)} process(es) outlived the test run (killed now): '
+              + '; '.join(f'{pid} {command}' for pid, command in sorted(left.items())), file=sys.stderr)
 
 
 # ---- fixtures ----------------------------------------------------------------------------------

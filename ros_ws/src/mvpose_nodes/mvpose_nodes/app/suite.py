@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from mvpose_nodes.tools.cli import ArgumentParser, UserError, exit_on_user_error
+from mvpose_nodes.tools.cli import ArgumentParser, UserError, end_with_parent, exit_on_user_error
 
 SWAP_GRACE_FRAMES = 10   # the first frames of a case may still be sorting left from right (issue 13's target)
 # What makes a case's feature messages, beside the case itself: the package's folders and modules (relative
@@ -113,7 +113,7 @@ def main(argv=None, prog='eval suite'):
         results = []
         import cv2
         cv2.setNumThreads(1)   # no OpenCV pool thread to fork with a mutex held (as in synth.synthesize)
-        with ProcessPoolExecutor(max_workers=args.jobs) as pool:
+        with ProcessPoolExecutor(max_workers=args.jobs, initializer=end_with_parent) as pool:
             for result in pool.map(run_case, cases, [args.true_lengths] * len(cases),
                                    [args.features_cache] * len(cases)):
                 results.append(result)

@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from mvpose_nodes.body.camera import studio_rig
-from mvpose_nodes.tools.cli import ArgumentParser, UserError, exit_on_user_error
+from mvpose_nodes.tools.cli import ArgumentParser, UserError, end_with_parent, exit_on_user_error
 
 WALK_HEADING = math.radians(45)  # walk from camera 6's side towards camera 2: cameras 3, 5, 7 see all of it
 CLIP_CENTRE_FRAME = 76  # the middle of the paper's frames 52–101: the walk clip is centred there
@@ -226,7 +226,8 @@ def synthesize(args):
     with CameraBagWriter(args.output, [c for c in stated if c.number in args.cameras], frames[0][0],
                          ground_truth=True, markers=appearance.markers) as bag:
         progress = Progress(len(frames), 'synth')
-        with ProcessPoolExecutor(max_workers=max(1, args.jobs), mp_context=multiprocessing.get_context('fork')) as pool:
+        with ProcessPoolExecutor(max_workers=max(1, args.jobs), mp_context=multiprocessing.get_context('fork'),
+                                 initializer=end_with_parent) as pool:
             for (number, outputs), (_, pose) in zip(pool.map(render_frame, frames), frames):
                 for camera_number, image, labels, markers in outputs:
                     bag.write_image(camera_number, number, image)

@@ -14,7 +14,7 @@ from mvpose_nodes.io.interfaces import MessageTypeError, message_class
 
 # Topics that carry calibration: latched on playback so that nodes started late still get them.
 LATCHED_TOPIC_SUFFIXES = ('/camera_info', '/camera_pose')
-DISCOVERY_PERIOD = 0.5  # [s] how often `record` looks for new topics
+POLLING_INTERVAL_MS = 100  # how often `record` looks for new topics, as ros2 bag record's --polling-interval
 DRAIN_TIME = 0.5  # [s] how long `record` keeps taking messages after Ctrl-C
 FLUSH_PERIOD = 1.0  # [s] `record` puts what it received on the disk at least this often (BagWriter.flush)
 # `play` starts once discovery has been quiet this long [s]: four DDS participant announcement periods of the
@@ -46,6 +46,8 @@ def build_parser(prog):
     chosen.add_argument('--topics', nargs='+', metavar='TOPIC', help='topics to record')
     chosen.add_argument('-a', '--all', action='store_true', help='record every topic (new ones too)')
     record.add_argument('-o', '--output', help='bag directory to create (default: rosbag2_YYYY_MM_DD-hh_mm_ss)')
+    record.add_argument('-p', '--polling-interval', type=int, default=POLLING_INTERVAL_MS, metavar='MS',
+                        help=f'how often to look for new topics to record [ms] (default {POLLING_INTERVAL_MS})')
 
     play = verbs.add_parser('play', help='replay a bag at its recorded timing',
                             description='Publish the stored messages of a bag directory or bare .mcap file '
@@ -315,16 +317,22 @@ def record(args):
     import rclpy
     from mvpose_nodes.ros.helpers import StopSignal, qos_to_dict, subscription_qos_for, topic_types
 
+    if args.polling_interval < 1:
+        raise UserError(f'--polling-interval must be at least 1 ms (got {args.polling_interval})')
     output = args.output or datetime.datetime.now().strftime('rosbag2_%Y_%m_%d-%H_%M_%S')
     wanted = None if args.all else set(args.topics)
     with StopSignal() as stop, BagWriter(output) as bag:
         node = rclpy.create_node('mvpose_bag_recorder')
         subscriptions = {}
         unknown_types = set()
+        received = {}   # topic -> [messages received, highest publication sequence number]
 
         def write(topic):
-            def callback(data):
+            def callback(data, info):
                 bag.write(topic, data, node.get_clock().now().nanoseconds)
+                counts = received.setdefault(topic, [0, 0])
+                counts[0] += 1
+                counts[1] = max(counts[1], info.get('publication_sequence_number') or 0)
             return callback
 
         def discover():
@@ -343,7 +351,7 @@ def record(args):
                     msg_class, topic, write(topic), subscription_qos_for(node, topic, depth=100), raw=True)
                 print(f'[record] recording {topic} ({type_name})', file=sys.stderr, flush=True)
 
-        node.create_timer(DISCOVERY_PERIOD, discover)
+        node.create_timer(args.polling_interval / 1000, discover)
         node.create_timer(FLUSH_PERIOD, bag.flush)
         discover()
         print(f'[record] writing {output}; Ctrl-C to stop', file=sys.stderr, flush=True)
@@ -356,6 +364,19 @@ def record(args):
         node.destroy_node()
         counts = bag.metadata()['rosbag2_bagfile_information']['message_count']
     print(f'[record] wrote {counts} messages on {len(subscriptions)} topics to {output}', file=sys.stderr)
+    missed = missed_messages(received)
+    if missed:
+        print(f'[record] warning: {sum(missed.values())} messages may have been missed before the subscription '
+              f'matched or on the way ({", ".join(f"{n} on {topic}" for topic, n in missed.items())}): their '
+              'publishers numbered more messages than came', file=sys.stderr)
+
+
+def missed_messages(received):
+    """{topic: messages its publisher sent that never came}, from {topic: [messages received, highest
+    publication sequence number]}: DDS numbers a publisher's messages from 1, so the highest number less
+    the count received is what was sent before the subscription matched, or lost (exact with one
+    publisher per topic; with several, numbers overlap and it counts too few, never too many)."""
+    return {topic: highest - count for topic, (count, highest) in sorted(received.items()) if highest > count}
 
 
 if __name__ == '__main__':

@@ -1,11 +1,23 @@
-"""The command-line front ends' plumbing: user mistakes become one-line errors instead of tracebacks.
+"""The command-line front ends' plumbing: user mistakes become one-line errors instead of tracebacks, and
+the processes a front end starts end with it.
 
 `UserError` is the front ends' own error. The layers below raise their own (a bag, a skin model, a
 motion file, a parameter...); `exit_on_user_error` reports those in the same one line, exit code 2.
 """
 import argparse
 import contextlib
+import ctypes
+import signal
 import sys
+
+PR_SET_PDEATHSIG = 1   # linux/prctl.h
+
+
+def end_with_parent():
+    """In a child (before exec, or as a pool worker's initializer): SIGTERM it when the process that started
+    it dies, however it dies (Linux prctl PR_SET_PDEATHSIG), so that a killed launch leaves no nodes behind
+    in their own sessions and a killed `synth -j` or `eval suite` no workers."""
+    ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
 
 
 class UserError(Exception):

@@ -55,7 +55,6 @@ Exit codes:
 """
 import argparse
 import contextlib
-import ctypes
 import math
 import os
 import shlex
@@ -66,7 +65,7 @@ import threading
 import time
 from pathlib import Path
 
-from mvpose_nodes.tools.cli import ArgumentParser, exit_on_user_error, UserError, without_ros_args
+from mvpose_nodes.tools.cli import ArgumentParser, end_with_parent, exit_on_user_error, UserError, without_ros_args
 from mvpose_nodes.tools.launch_file import (  # noqa: F401 (the launcher's API, for its users)
     DEFAULT_PACKAGE, ProcessSpec, declared_arguments, load_launch_file, package_executable,
     package_launch_file, process_specs, yaml_value)
@@ -75,14 +74,7 @@ EXIT_PROCESS_FAILED = 1  # also: stopping needed more than SIGINT
 EXIT_REQUIRED_ENDED = 100  # + the 1-based position of the required process
 EXIT_INTERRUPTED = 130
 POLL_INTERVAL = 0.05  # seconds between looks at the children: short enough that reactions feel immediate
-PR_SET_PDEATHSIG = 1     # linux/prctl.h
 DRAIN_TIMEOUT = 1.0  # a grandchild may hold an ended child's output pipe open; don't wait for it for ever
-
-
-def _end_with_parent():
-    """In a child before exec: SIGTERM it when the launching process dies, however it dies (Linux
-    prctl PR_SET_PDEATHSIG), so that a killed launch leaves no nodes behind in their own sessions."""
-    ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
 
 
 class Launch:
@@ -125,7 +117,7 @@ class Launch:
     def _spawn(self, spec):
         popen = subprocess.Popen(spec.command, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
                                  stderr=subprocess.STDOUT, env={**os.environ, 'PYTHONUNBUFFERED': '1'}, text=True,
-                                 errors='replace', start_new_session=True, preexec_fn=_end_with_parent)
+                                 errors='replace', start_new_session=True, preexec_fn=end_with_parent)
         reader = threading.Thread(target=self._forward_output, args=(spec.name, popen.stdout), daemon=True)
         reader.start()
         self.say(f'started {spec.name} (pid {popen.pid})')
