@@ -165,16 +165,20 @@ class Publisher:
         return self.publisher.wait_for_all_acked(Duration(seconds=timeout))
 
 
-def wait_for_graph(topics_with_both_ends, timeout=60):
-    """Until every topic has a publisher and a subscriber in the graph, then a moment for them to match:
-    the player waits for its own subscribers only, not for the nodes downstream of them."""
+def wait_for_graph(inputs=(), outputs=(), timeout=60):
+    """Until the nodes' subscriptions `inputs` have matched a publisher and their publishers `outputs` a
+    subscription ((fully qualified node name, topic) pairs; an output may add the count wanted), as the nodes
+    say on /diagnostics (ros.diagnostics.MatchedEndpoints): connected, not only discovered. The player waits
+    for its own subscribers only, not for the nodes downstream of them."""
     import rclpy
+    from mvpose_nodes.ros.diagnostics import MatchedEndpoints
     node = rclpy.create_node('graph_watcher')
+    endpoints = MatchedEndpoints(node)
     try:
-        spin_until(node, lambda: all(node.count_publishers(t) and node.count_subscribers(t)
-                                     for t in topics_with_both_ends), timeout,
-                   f'a publisher and a subscriber on each of {topics_with_both_ends}')
-        time.sleep(1.0)
+        deadline = time.monotonic() + timeout
+        while (missing := endpoints.missing(inputs, outputs)) and time.monotonic() < deadline:
+            rclpy.spin_once(node, timeout_sec=0.1)
+        assert not missing, f'the graph did not connect within {timeout} s: not matched: {", ".join(missing)}'
     finally:
         node.destroy_node()
 
@@ -183,7 +187,7 @@ def wait_for_graph(topics_with_both_ends, timeout=60):
 GRAPH_LAUNCH_FILE = 'ros_ws/src/mvpose_nodes/launch/mvpose.launch.yaml'
 GRAPH_CAMERAS = (3, 5, 7)
 GRAPH_INPUTS = [f'/cam{k}/{name}' for k in GRAPH_CAMERAS for name in ('image_raw/compressed', 'camera_info', 'camera_pose')]
-GRAPH_FEATURES = [f'/cam{k}/{name}' for k in GRAPH_CAMERAS for name in ('skin_ellipses', 'labelled_contour')]
+SKELETON_OUT = ('/skeleton_fitter', '/mvpose/skeleton')   # an output of wait_for_graph: someone receives it
 
 
 class SkeletonRecorder:

@@ -120,7 +120,22 @@ def pytest_collection_modifyitems(config, items):
         LEFT_OUT.extend((item.nodeid, tiers_of(item)) for item in needing_ros)
 
 
+FAILED_RUNS = ROOT / 'output' / 'test'   # where a failing run's failures are kept (README, "The two commands")
+FAILURES = []   # the text of each failing test's report: its traceback and captured output
+
+
+def pytest_runtest_logreport(report):
+    if report.failed:
+        captured = ''.join(f'\n--- {name} ---\n{text}' for name, text in report.sections)
+        FAILURES.append(f'=== {report.nodeid} ({report.when}) ===\n{report.longreprtext}{captured}\n')
+
+
 def pytest_terminal_summary(terminalreporter):
+    if FAILURES:
+        FAILED_RUNS.mkdir(parents=True, exist_ok=True)
+        log = FAILED_RUNS / time.strftime('failed-%Y%m%d-%H%M%S.log')
+        log.write_text(''.join(FAILURES))
+        terminalreporter.write_line(f'The failures, with their captured output: {log}', red=True)
     if LEFT_OUT:
         names = ', '.join(f'{name} ({"/".join(sorted(tiers))})' for name, tiers in LEFT_OUT)
         terminalreporter.write_line(f'Not run through ./mvpose test (MVPOSE_ROOT unset), so without ROS: the pure '

@@ -23,7 +23,7 @@ CAMERA_INFO_TOPIC = '/cam3/camera_info'
 SKELETON_TYPE = 'mvpose_msgs/msg/Skeleton'
 FRAMES = 5
 # Play only once this process's subscriptions are matched, so that none of the first messages is lost.
-WAIT = ('--wait-for-subscribers', '--delay', 0.5)
+WAIT = ('--wait-for-subscribers',)
 
 # Publishes FRAMES Skeletons (seeds 0..4) and one latched CameraInfo once a subscriber matched.
 PUBLISHER_SCRIPT = f'''

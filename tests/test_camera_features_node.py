@@ -59,7 +59,7 @@ def test_node_publishes_every_feature_with_the_source_stamps(small_bag, features
     try:
         listener.wait_for_node()
         run_mvpose('bag', 'play', small_bag, '--topics', '/cam3/image_raw/compressed', '/cam3/camera_info',
-                   '--wait-for-subscribers', '--delay', 0.5, timeout=120)
+                   '--wait-for-subscribers', timeout=120)
         frames = FRAMES[1] - FRAMES[0] + 1
         spin_until(listener.node, lambda: all(len(v) >= frames for v in listener.received.values()), 60,
                    f'{frames} messages on each output')
@@ -103,7 +103,7 @@ def test_with_a_requester_the_node_announces_every_image_and_computes_only_the_r
         requests.wait_for_subscribers()
         spin_for(listener.node, 1.0)   # the node sees its requester
         run_mvpose('bag', 'play', small_bag, '--topics', '/cam3/image_raw/compressed', '/cam3/camera_info',
-                   '--wait-for-subscribers', '--delay', 0.5, timeout=120)
+                   '--wait-for-subscribers', timeout=120)
         spin_until(listener.node, lambda: len(announced) == len(stamps), 30, 'every image announced')
         spin_for(listener.node, 1.0)
         assert listener.received['labelled_contour'] == [], 'no features before a request'

@@ -5,7 +5,9 @@ import os
 import signal
 
 import pytest
-from common import GRAPH_CAMERAS, GRAPH_FEATURES, GRAPH_INPUTS, SkeletonRecorder, wait_for_graph
+from common import GRAPH_CAMERAS, GRAPH_INPUTS, SKELETON_OUT, SkeletonRecorder, wait_for_graph
+
+from mvpose_nodes.app.graph_run import graph_inputs
 
 pytestmark = pytest.mark.graph
 
@@ -23,7 +25,7 @@ def play_into_graph(synth_bag, background, recorder):
     bag = synth_bag('--cameras', *GRAPH_CAMERAS, '--frames', BAG_FRAMES, '--resolution', '960x540')
     cameras = {k: start_camera(background, k) for k in GRAPH_CAMERAS}
     fitter = start_fitter(background)
-    wait_for_graph(GRAPH_FEATURES + ['/mvpose/skeleton'])
+    wait_for_graph(graph_inputs(GRAPH_CAMERAS), [SKELETON_OUT])
     player = background('bag', 'play', bag, '--rate', RATE, '--topics', *GRAPH_INPUTS)
     recorder.spin_until_count(5, timeout=60)
     recorder.spin_for(1.0)

@@ -6,9 +6,10 @@ import re
 import numpy as np
 import pytest
 import yaml
-from common import (GRAPH_CAMERAS, GRAPH_FEATURES, GRAPH_INPUTS, GRAPH_LAUNCH_FILE, SkeletonRecorder, run_mvpose,
+from common import (GRAPH_CAMERAS, GRAPH_INPUTS, GRAPH_LAUNCH_FILE, SKELETON_OUT, SkeletonRecorder, run_mvpose,
                     wait_for_graph)
 
+from mvpose_nodes.app.graph_run import graph_inputs
 from mvpose_nodes.body.model import JOINT_NAMES
 
 pytestmark = pytest.mark.graph
@@ -90,12 +91,11 @@ def test_skeleton_fitter_node_in_the_graph(synth_bag, background, ros_context):
         background('run', 'camera_features', '--ros-args', '-r', f'__ns:=/cam{k}')
     fitter = background('run', 'skeleton_fitter', '--ros-args', '-p', 'cameras:=[3, 5]')
     echo = background('topic', 'echo', '/mvpose/skeleton', '--count', 10, '--timeout', 200)
-    wait_for_graph([f'/cam{k}/{name}' for k in (3, 5) for name in ('skin_ellipses', 'labelled_contour')]
-                   + ['/mvpose/skeleton'])
+    wait_for_graph(graph_inputs((3, 5)), [SKELETON_OUT])
     for _ in range(2):
         run_mvpose('bag', 'play', bag, '--topics', '/cam3/image_raw/compressed', '/cam5/image_raw/compressed',
                    '/cam3/camera_info', '/cam5/camera_info', '/cam3/camera_pose', '/cam5/camera_pose',
-                   '--wait-for-subscribers', '--delay', 1.0, '--rate', 0.2, timeout=180)
+                   '--wait-for-subscribers', '--rate', 0.2, timeout=180)
     code, out, err = echo.finish(timeout=200)
     assert code == 0, err
     skeletons = [d for d in yaml.safe_load_all(out) if d]
@@ -124,10 +124,12 @@ def test_marker_mode_in_the_graph(synth_bag, background, ros_context):
     graph = background('launch', launch_file)
     echo = background('topic', 'echo', '/mvpose/skeleton', '--count', 5, '--timeout', 120)
     echo_fused = background('topic', 'echo', '/cam5/marker_tracks_fused', '--count', 5, '--timeout', 120)
-    wait_for_graph([f'/cam{k}/marker_tracks' for k in (3, 5, 7)] + ['/mvpose/skeleton', '/cam5/marker_tracks_fused'])
+    wait_for_graph([('/marker_skeleton', f'/cam{k}/marker_tracks') for k in (3, 5, 7)]
+                   + [(f'/cam{k}/marker_tracker', f'/cam{k}/marker_tracks_fused') for k in (3, 5, 7)],
+                   [('/marker_skeleton', '/mvpose/skeleton'), ('/marker_skeleton', '/cam5/marker_tracks_fused', 2)])
     played = [f'/cam{k}/{kind}' for k in (3, 5, 7)
               for kind in ('image_raw/compressed', 'camera_info', 'camera_pose', 'ground_truth/markers')]
-    run_mvpose('bag', 'play', bag, '--topics', *played, '--wait-for-subscribers', '--delay', 1.0, '--rate', 0.2,
+    run_mvpose('bag', 'play', bag, '--topics', *played, '--wait-for-subscribers', '--rate', 0.2,
                timeout=180)
     code, out, err = echo.finish(timeout=150)
     assert code == 0, err
@@ -170,7 +172,7 @@ def test_every_frame_set_gets_a_skeleton_whatever_the_start_up_order(order, synt
     try:
         if order.startswith('graph first'):
             background('launch', GRAPH_LAUNCH_FILE)
-            wait_for_graph(GRAPH_FEATURES + ['/mvpose/skeleton'])
+            wait_for_graph(graph_inputs(GRAPH_CAMERAS), [SKELETON_OUT])
             run_mvpose('bag', 'play', bag, '--rate', 0.2, timeout=120)
         else:
             player = background('bag', 'play', bag, '--rate', 0.2, '--topics', *GRAPH_INPUTS, '--wait-for-subscribers', 120)
@@ -195,7 +197,7 @@ def test_the_same_bag_through_a_fresh_graph_gives_the_same_skeletons(synth_bag, 
         recorder = SkeletonRecorder()
         try:
             graph = background('launch', GRAPH_LAUNCH_FILE)
-            wait_for_graph(GRAPH_FEATURES + ['/mvpose/skeleton'])
+            wait_for_graph(graph_inputs(GRAPH_CAMERAS), [SKELETON_OUT])
             run_mvpose('bag', 'play', bag, '--rate', 0.2, timeout=120)
             recorder.spin_until_count(5, timeout=150)
         finally:

@@ -83,7 +83,7 @@ def run_graph(bag, log_path, rate=1.0, on_skeleton=None):
             launch.start()
             wait_for_connections(node, launch, stop, run.log)
             player = subprocess.Popen([sys.executable, '-m', 'mvpose_nodes.app.main', 'bag', 'play', str(bag),
-                                       '--topics', *played, '--wait-for-subscribers', '--delay', '1.0', '--rate', str(rate)],
+                                       '--topics', *played, '--wait-for-subscribers', '--rate', str(rate)],
                                       stdout=log, stderr=subprocess.STDOUT)
             playback_start = time.monotonic()
             last_seen, count = time.monotonic(), 0
@@ -110,22 +110,38 @@ def run_graph(bag, log_path, rate=1.0, on_skeleton=None):
     return run
 
 
+def graph_inputs(cameras):
+    """The (node, topic) subscriptions of the markerless graph of `cameras` that must have matched their
+    publishers before frame sets can flow: the fitter's features and announcements, each camera's requests."""
+    return ([('/skeleton_fitter', f'/cam{k}/{topic}') for k in cameras
+             for topic in ('skin_ellipses', 'labelled_contour', 'frame_available')]
+            + [(f'/cam{k}/camera_features', f'/cam{k}/frame_request') for k in cameras])
+
+
 def wait_for_connections(node, launch, stop, log, cameras=GRAPH_CAMERAS):
-    """Until the feature topics of every one of `cameras` and /mvpose/skeleton have their publishers and subscribers
-    (the player waits for its own subscribers only, not for the nodes downstream of them); UserError
-    naming `log` (the nodes' log) when a node stops or the graph does not connect."""
+    """Until the graph of `cameras` is connected: every subscription of graph_inputs has matched (as the
+    nodes say on /diagnostics: MatchedEndpoints) and so have `node`'s own subscriptions of the graph's
+    outputs (/mvpose/skeleton, labelled contours); the player waits for its own subscribers only. UserError
+    naming `log` (the nodes' log) and what has not matched when a node stops or CONNECT_TIMEOUT passes."""
     import rclpy
-    topics = [f'/cam{k}/{name}' for k in cameras for name in FEATURE_TOPICS]
+    from mvpose_nodes.ros.camera_bag import SKELETON_TOPIC
+    from mvpose_nodes.ros.diagnostics import MatchedEndpoints
+    endpoints = MatchedEndpoints(node)
+    wanted = graph_inputs(cameras)
+    own = [subscription for subscription in node.subscriptions
+           if subscription.topic_name == SKELETON_TOPIC or subscription.topic_name.endswith('/labelled_contour')]
     deadline = time.monotonic() + CONNECT_TIMEOUT
     while not stop.stopped:
-        if all(node.count_publishers(t) and node.count_subscribers(t) for t in topics) and \
-                node.count_publishers('/mvpose/skeleton'):
-            time.sleep(1.0)  # discovery is done; give the endpoints a moment to match
+        missing = endpoints.missing(wanted)
+        missing += [f'{subscription.topic_name} -> this process' for subscription in own
+                    if not subscription.get_publisher_count()]
+        if not missing:
             return
         if launch.wait(timeout=0) is not None:
             raise UserError(f'a node of the graph stopped while starting (exit code {launch.exit_code}); see {log}')
         if time.monotonic() > deadline:
-            raise UserError(f'the graph did not connect within {CONNECT_TIMEOUT:.0f} s; see {log}')
+            raise UserError(f'the graph did not connect within {CONNECT_TIMEOUT:.0f} s (not matched: '
+                            f'{", ".join(missing)}); see {log}')
         rclpy.spin_once(node, timeout_sec=0.1)
 
 

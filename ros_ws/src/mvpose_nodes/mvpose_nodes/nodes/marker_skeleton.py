@@ -21,6 +21,7 @@ from mvpose_nodes.markers.detection import FLAG_LOST
 from mvpose_nodes.ros.multi_camera import MultiCameraNode
 from mvpose_nodes.ros.conversions import blobs_from_message, marker_tracks, skeleton_markers, skeleton_message, \
     tracks_from_message
+from mvpose_nodes.ros.diagnostics import NodeDiagnostics
 from mvpose_nodes.ros.helpers import LATCHED, run_node
 from mvpose_nodes.ros.params import MARKER_SKELETON
 
@@ -35,9 +36,19 @@ class MarkerSkeletonNode(MultiCameraNode):
         self.marker_publisher = self.create_publisher(MarkerArray, '/mvpose/skeleton_markers', 10)
         self.fused_publishers = {k: self.create_publisher(MarkerTracks, f'/cam{k}/marker_tracks_fused', STREAM_DEPTH)
                                  for k in self.cameras}
+        self.counts = {'frame sets': 0, 'skeletons': 0, 'skeletons degraded': 0}
+        self.diagnostics = NodeDiagnostics(self, self.state)
         self.get_logger().info(f'fusing the marker tracks of cameras {self.cameras}')
 
+    def state(self):
+        """The node's diagnostics: level, message and counters (ros/diagnostics.py)."""
+        counts = self.counts
+        message = (f"{counts['frame sets']} frame sets, {counts['skeletons']} skeletons "
+                   f"({counts['skeletons degraded']} degraded)")
+        return ('warn' if counts['skeletons degraded'] else 'ok'), message, counts
+
     def on_frame_set(self, frame_set):
+        self.counts['frame sets'] += 1
         started = time.perf_counter()
         count = len(self.cameras)
         positions = np.full((count, len(JOINT_NAMES), 2), np.nan)
@@ -81,6 +92,8 @@ class MarkerSkeletonNode(MultiCameraNode):
         message = skeleton_message(points, stamp, status=status, status_message=reason if degraded else '',
                                    fit_time=time.perf_counter() - started)
         self.skeleton_publisher.publish(message)
+        self.counts['skeletons'] += 1
+        self.counts['skeletons degraded'] += degraded
         self.marker_publisher.publish(skeleton_markers(points, message.header, status))
 
 

@@ -26,6 +26,7 @@ from mvpose_nodes.markers.detection import FLAG_LOST, MARKER_NAMES
 from mvpose_nodes.markers.sequencing import LABELLINGS_KEPT, QUEUED_IMAGES_KEPT, FusedTurns, LabelledStart
 from mvpose_nodes.markers.tracking import MarkerTracker, NearestNeighbourTracker
 from mvpose_nodes.ros.conversions import ImageError, colour_image, marker_tracks, stamp_ns, tracks_from_message
+from mvpose_nodes.ros.diagnostics import NodeDiagnostics
 from mvpose_nodes.ros.helpers import ReportOnce, camera_of_namespace, run_node
 from mvpose_nodes.ros.params import MARKER_TRACKER, ParameterError, changed_values, declare_parameters
 
@@ -52,6 +53,8 @@ class MarkerTrackerNode(ReportOnce, Node):
         self.fused_topic = self.resolve_topic_name('marker_tracks_fused')
         self.create_subscription(MarkerTracks, 'marker_tracks_fused', self.on_fused, STREAM_DEPTH)
         self.create_timer(0.01, self.track_queued)
+        self.counts = {'images': 0, 'images tracked': 0, 'images rejected': 0}
+        self.diagnostics = NodeDiagnostics(self, self.state)
         self.get_logger().info(f'camera {self.camera}: {self.values["method"]} marker tracking; waiting for the '
                                f'labelled calibration frame on {self.labelling_topic}')
 
@@ -70,7 +73,16 @@ class MarkerTrackerNode(ReportOnce, Node):
         for rgb, header in self.start.add_labelling(stamp_ns(message.header), message):
             self.process(rgb, header)
 
+    def state(self):
+        """The node's diagnostics: level, message and counters (ros/diagnostics.py)."""
+        message = (f"{self.counts['images']} images, {self.counts['images tracked']} tracked"
+                   + ('' if self.initialised else f'; waiting for the labelled frame on {self.labelling_topic}'))
+        if self.counts['images rejected']:
+            return 'warn', f"{message}, {self.counts['images rejected']} rejected", self.counts
+        return 'ok', message, self.counts
+
     def on_image(self, message, topic):
+        self.counts['images'] += 1
         try:
             rgb = colour_image(message)
         except ImageError as error:
@@ -80,6 +92,7 @@ class MarkerTrackerNode(ReportOnce, Node):
     def reply(self, header, status, cause, reason):
         """Publish a MarkerTracks without positions (all lost) carrying `status` and `reason` (logged once)."""
         self.report_once(cause, reason)
+        self.counts['images rejected'] += 1
         count = len(MARKER_NAMES)
         self.publisher.publish(marker_tracks(header, [[0.0, 0.0]] * count, [FLAG_LOST] * count, status, reason))
 
@@ -115,6 +128,7 @@ class MarkerTrackerNode(ReportOnce, Node):
             rgb, header, labelled = item
             positions, flags = self.tracker.track(rgb) if labelled is None else labelled
             self.publisher.publish(marker_tracks(header, positions, flags, blobs=self.tracker.detections))
+            self.counts['images tracked'] += 1
             self.turns.sent(stamp_ns(header), time.monotonic())
 
     def on_fused(self, message):

@@ -10,6 +10,9 @@ message, any publisher of another message type on a topic the node subscribes: f
   cpu/thread/<name>             one thread (e.g. 'executor': rclpy's callbacks, taking and deserialising
                                 messages; 'preparing' and 'fitting': the fitter's two workers)
   cpu/stage/<stage>, calls/<stage>   the StageClock stages (each within one of the threads)
+  publishers matched/<topic>    publishers matched by the node's subscription of <topic>, and
+  subscribers matched/<topic>   subscriptions matched by its publisher of <topic> (MatchedEndpoints: how a
+                                launcher or a test knows the graph is connected, not only discovered)
 What no stage covers in a thread is rclpy's own work there (take, deserialise, executor); what no
 thread covers in the process is DDS's threads (transport, discovery) and the interpreter's.
 """
@@ -24,6 +27,8 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 
 DIAGNOSTICS_TOPIC = '/diagnostics'
 DIAGNOSTICS_PERIOD = 1.0   # [s], as ROS's diagnostic_updater publishes
+PUBLISHERS_MATCHED = 'publishers matched/'
+SUBSCRIBERS_MATCHED = 'subscribers matched/'
 LEVELS = {'ok': DiagnosticStatus.OK, 'warn': DiagnosticStatus.WARN, 'error': DiagnosticStatus.ERROR}
 
 
@@ -132,12 +137,42 @@ class NodeDiagnostics:
         if strangers:
             level = 'error' if level == 'error' else 'warn'
             message += '; ' + ', '.join(f'{topic} has a publisher of {found}' for topic, found, _ in strangers)
+        matched = [KeyValue(key=f'{PUBLISHERS_MATCHED}{subscription.topic_name}',
+                            value=str(subscription.get_publisher_count())) for subscription in self.node.subscriptions]
+        matched += [KeyValue(key=f'{SUBSCRIBERS_MATCHED}{publisher.topic_name}',
+                             value=str(publisher.get_subscription_count())) for publisher in self.node.publishers]
         status = DiagnosticStatus(level=LEVELS[level], name=self.node.get_fully_qualified_name(), message=message,
                                   hardware_id=self.hardware_id,
-                                  values=status_values(self.clocks, self.threads, counters))
+                                  values=status_values(self.clocks, self.threads, counters) + matched)
         array = DiagnosticArray(status=[status])
         array.header.stamp = self.node.get_clock().now().to_msg()
         self.publisher.publish(array)
+
+
+class MatchedEndpoints:
+    """What the nodes of a graph say on /diagnostics about their connections, as of each node's newest status
+    (a node not heard from yet has matched nothing). missing(inputs, outputs): the wanted (fully qualified
+    node name, topic) subscriptions `inputs` that have matched no publisher yet, and the (node name, topic)
+    publishers `outputs` that have matched no subscription yet, each as a line of text."""
+
+    def __init__(self, node):
+        self.matched = {}   # (prefix, node name, topic) -> count
+        node.create_subscription(DiagnosticArray, DIAGNOSTICS_TOPIC, self.take, 50)
+
+    def take(self, array):
+        for status in array.status:
+            for value in status.values:
+                for prefix in (PUBLISHERS_MATCHED, SUBSCRIBERS_MATCHED):
+                    if value.key.startswith(prefix):
+                        self.matched[(prefix, status.name, value.key[len(prefix):])] = int(value.value)
+
+    def missing(self, inputs=(), outputs=()):
+        """`outputs` may also give (node name, topic, count): that many subscriptions matched."""
+        return ([f'{topic} -> {name}' for name, topic in inputs
+                 if self.matched.get((PUBLISHERS_MATCHED, name, topic), 0) < 1]
+                + [f'{output[0]} -> {output[1]} ({output[2] if len(output) > 2 else 1} subscriber(s))'
+                   for output in outputs
+                   if self.matched.get((SUBSCRIBERS_MATCHED, *output[:2]), 0) < (output[2] if len(output) > 2 else 1)])
 
 
 def foreign_publishers(node):
