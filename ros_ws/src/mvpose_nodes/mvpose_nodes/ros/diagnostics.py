@@ -168,11 +168,12 @@ class MatchedEndpoints:
 
     def missing(self, inputs=(), outputs=()):
         """`outputs` may also give (node name, topic, count): that many subscriptions matched."""
-        return ([f'{topic} -> {name}' for name, topic in inputs
+        lines = [f'{topic} -> {name}' for name, topic in inputs
                  if self.matched.get((PUBLISHERS_MATCHED, name, topic), 0) < 1]
-                + [f'{output[0]} -> {output[1]} ({output[2] if len(output) > 2 else 1} subscriber(s))'
-                   for output in outputs
-                   if self.matched.get((SUBSCRIBERS_MATCHED, *output[:2]), 0) < (output[2] if len(output) > 2 else 1)])
+        for name, topic, count in ((*output, 1)[:3] for output in outputs):
+            if self.matched.get((SUBSCRIBERS_MATCHED, name, topic), 0) < count:
+                lines.append(f'{name} -> {topic} ({count} subscriber(s))')
+        return lines
 
 
 def foreign_publishers(node):
