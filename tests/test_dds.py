@@ -18,7 +18,7 @@ pytestmark = pytest.mark.dds
 TOPIC = '/test/dds_skeleton'
 
 PUBLISHER_SCRIPT = f'''
-import sys, time
+import sys
 sys.path.insert(0, {str(Path(__file__).parent)!r})
 import rclpy
 from mvpose_msgs.msg import Skeleton
@@ -27,7 +27,6 @@ from samples import sample_skeleton
 rclpy.init()
 node = rclpy.create_node('dds_test_publisher')
 publisher = Publisher(node, Skeleton, {TOPIC!r}, 10).wait_for_subscribers(timeout=30)
-time.sleep(0.3)
 publisher.publish(*(sample_skeleton(seed) for seed in (11, 12, 13)))
 publisher.wait_for_acknowledgements()
 '''

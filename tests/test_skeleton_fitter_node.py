@@ -148,9 +148,9 @@ def test_skeleton_fitter_node_survives_nan_calibration_and_malformed_contours(ba
                    '-w', 1, '--once')
         run_mvpose('topic', 'pub', f'/cam{k}/labelled_contour', 'mvpose_msgs/msg/LabelledContour',
                    stamp + ', x: [1, 2, 3], y: [1, 2, 3], labels: [1], sides: [1]}', '-w', 1, '--once')
-    import time
-    time.sleep(2.0)
+    logged = ''.join(fitter.wait_for_stderr_line('/cam5/labelled_contour: ', timeout=60))
     code, _, err = fitter.interrupt()
+    err = logged + err
     assert code == 0, err
     assert '/cam3 calibration unusable: camera_info K is not a valid intrinsic matrix' in err, err
     assert '/cam5/labelled_contour: LabelledContour x, y, labels and sides differ in length; dropped' in err, err
