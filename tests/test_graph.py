@@ -202,8 +202,9 @@ def test_the_same_bag_through_a_fresh_graph_gives_the_same_skeletons(synth_bag, 
             recorder.spin_until_count(5, timeout=150)
         finally:
             recorder.close()
-        code, _, err = graph.interrupt()
-        assert code == 130, err   # the launcher's exit code after Ctrl-C, as ros2 launch's
+        code, out, err = graph.interrupt()
+        assert code == 130, f'{out}\n{err}'   # the launcher's exit code after Ctrl-C, as ros2 launch's; its
+        # output (stdout) says which node needed more than SIGINT
         runs.append(recorder.joints)
     first, second = runs
     assert sorted(first) == sorted(second) and len(first) == 5

@@ -20,8 +20,11 @@ from mvpose_nodes.vision.skin import SkinModelError
 SPIN_PERIOD = 0.1  # [s] the longest a node takes to see a shutdown
 # [s] the longest a stopped node's clean-up may take. rclpy's Node.destroy_node() once spun for ever at 100 %
 # of a core in destroy_when_not_in_use() (py-spy; 1 in a few hundred stops, EventsExecutor), leaving an
-# orphan behind its launcher: past this the process says so and exits.
-CLEAN_UP_LIMIT = 5.0
+# orphan behind its launcher: past this the process says so and exits. Shorter than the 5 s a launcher gives
+# a node after SIGINT before it sends SIGTERM (`launch --sigint-timeout`, as ros2 launch's), so that such a
+# hang still ends as a clean stop (at 5 s it raced the launcher's SIGTERM: the likely cause of a fresh-clone
+# test run whose launch exited 1, "some process needed SIGTERM", instead of 130; its output was not kept).
+CLEAN_UP_LIMIT = 3.0
 
 # Reliable, transient-local, depth 1: calibration, and the last skeleton for late subscribers.
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
