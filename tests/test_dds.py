@@ -102,17 +102,33 @@ def test_topic_bw_and_doctor_measure_a_topics_bandwidth(background):
 
 
 STUCK_NODE_SCRIPT = '''
-import os, signal, sys, threading, time
+import ctypes, os, signal, sys, threading, time
 from rclpy.node import Node
 from mvpose_nodes.ros import helpers
 helpers.CLEAN_UP_LIMIT = 1.0
+HANG_IN = sys.argv[1]
+
+
+def hang_in_c():
+    """For ever in C, where no signal reaches Python: a mutex locked twice."""
+    mutex = ctypes.create_string_buffer(64)
+    ctypes.CDLL(None).pthread_mutex_lock(mutex)
+    ctypes.CDLL(None).pthread_mutex_lock(mutex)
 
 
 class StuckNode(Node):
-    """Stops itself with Ctrl-C, then hangs in its clean-up as rclpy's destroy_node once did."""
+    """Stops itself with Ctrl-C, then hangs: in its clean-up, as rclpy's destroy_node once did, or in a
+    callback, in C, as a node once did in the executor."""
     def __init__(self):
         super().__init__('stuck_node')
-        threading.Timer(0.5, os.kill, args=(os.getpid(), signal.SIGINT)).start()
+        if HANG_IN == 'callback':
+            self.create_timer(0.5, self.stop_and_hang)
+        else:
+            threading.Timer(0.5, os.kill, args=(os.getpid(), signal.SIGINT)).start()
+
+    def stop_and_hang(self):
+        os.kill(os.getpid(), signal.SIGINT)
+        hang_in_c()
 
     def destroy_node(self):
         time.sleep(600)
@@ -122,9 +138,12 @@ sys.exit(helpers.run_node(StuckNode))
 '''
 
 
-def test_a_node_whose_clean_up_hangs_still_exits(tmp_path):
-    """run_node: a stopped node whose clean-up hangs says so and exits (no orphan left behind its launcher)."""
+@pytest.mark.parametrize('hang_in', ['clean-up', 'callback'])
+def test_a_node_that_hangs_after_ctrl_c_still_exits(tmp_path, hang_in):
+    """run_node: a node that hangs after Ctrl-C, in its clean-up or in the executor, says so and exits
+    CLEAN_UP_LIMIT after (no orphan left behind its launcher, and within the launcher's SIGINT grace)."""
     script = tmp_path / 'stuck.py'
     script.write_text(STUCK_NODE_SCRIPT)
-    result = run_mvpose('exec', 'python', script, timeout=30)
-    assert 'StuckNode: clean-up after stopping hung for 1 s in rclpy; exiting without it' in result.stderr
+    result = run_mvpose('exec', 'python', script, hang_in, timeout=30)
+    assert ('StuckNode: still running 1 s after it was asked to stop (hung in rclpy); exiting without cleaning up'
+            in result.stderr), result.stderr

@@ -18,12 +18,12 @@ from mvpose_nodes.ros.params import ParameterError
 from mvpose_nodes.vision.skin import SkinModelError
 
 SPIN_PERIOD = 0.1  # [s] the longest a node takes to see a shutdown
-# [s] the longest a stopped node's clean-up may take. rclpy's Node.destroy_node() once spun for ever at 100 %
-# of a core in destroy_when_not_in_use() (py-spy; 1 in a few hundred stops, EventsExecutor), leaving an
-# orphan behind its launcher: past this the process says so and exits. Shorter than the 5 s a launcher gives
-# a node after SIGINT before it sends SIGTERM (`launch --sigint-timeout`, as ros2 launch's), so that such a
-# hang still ends as a clean stop (at 5 s it raced the launcher's SIGTERM: the likely cause of a fresh-clone
-# test run whose launch exited 1, "some process needed SIGTERM", instead of 130; its output was not kept).
+# [s] the longest a node may take to end once asked to stop (Ctrl-C, SIGTERM): past it the process says so and
+# exits (watch_stop). Two hangs in rclpy made this needed: Node.destroy_node() once spun for ever at 100 % of a
+# core in destroy_when_not_in_use() (py-spy; 1 in a few hundred stops, EventsExecutor), and a camera_features
+# node once ignored SIGINT and then SIGTERM until its launcher killed it (1 of 10 fresh-clone test runs).
+# Shorter than the 5 s a launcher gives a node after SIGINT before it sends SIGTERM (`launch --sigint-timeout`,
+# as ros2 launch's), so that such a hang still ends as a clean stop.
 CLEAN_UP_LIMIT = 3.0
 
 # Reliable, transient-local, depth 1: calibration, and the last skeleton for late subscribers.
@@ -60,6 +60,7 @@ def run_node(make_node, args=None):
     core and ignores Ctrl-C in this rclpy (7.1.6), so it is spun in steps of SPIN_PERIOD, after each of
     which a shutdown (the signal handler's) is seen."""
     rclpy.init(args=args)
+    watch_stop(rclpy.get_default_context(), getattr(make_node, '__name__', 'node'))
     node = None
     executor = EventsExecutor()
     try:
@@ -73,21 +74,30 @@ def run_node(make_node, args=None):
         print(f'[ERROR] {make_node.__name__}: {error}', file=sys.stderr)
         return 2
     finally:
-        watchdog = threading.Timer(CLEAN_UP_LIMIT, abandon_clean_up, args=(getattr(make_node, '__name__', 'node'),))
-        watchdog.daemon = True
-        watchdog.start()
         executor.shutdown()
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
-        watchdog.cancel()
     return 0
 
 
+def watch_stop(context, name):
+    """A daemon thread that ends the process CLEAN_UP_LIMIT seconds after `context` was shut down, if it still
+    runs then. rclpy's signal handler shuts the context down from a thread of its own on Ctrl-C and SIGTERM, so
+    this holds wherever the main thread hangs: in the executor or in the clean-up."""
+    def watch():
+        while context.ok():
+            time.sleep(SPIN_PERIOD)
+        time.sleep(CLEAN_UP_LIMIT)
+        abandon_clean_up(name)
+    threading.Thread(target=watch, name='stop watchdog', daemon=True).start()
+
+
 def abandon_clean_up(name):
-    """A node's clean-up that hangs (run_node): say it and end the process, which frees what it held."""
-    print(f'[WARN] {name}: clean-up after stopping hung for {CLEAN_UP_LIMIT:g} s in rclpy; exiting without it',
-          file=sys.stderr, flush=True)
+    """A node that hangs after it was asked to stop (watch_stop): say it and end the process, which frees what
+    it held."""
+    print(f'[WARN] {name}: still running {CLEAN_UP_LIMIT:g} s after it was asked to stop (hung in rclpy); '
+          'exiting without cleaning up', file=sys.stderr, flush=True)
     os._exit(0)
 
 
