@@ -105,7 +105,7 @@ STUCK_NODE_SCRIPT = '''
 import ctypes, os, signal, sys, threading, time
 from rclpy.node import Node
 from mvpose_nodes.ros import helpers
-helpers.CLEAN_UP_LIMIT = 1.0
+helpers.STOP_LIMIT = 1.0
 HANG_IN = sys.argv[1]
 
 
@@ -141,7 +141,7 @@ sys.exit(helpers.run_node(StuckNode))
 @pytest.mark.parametrize('hang_in', ['clean-up', 'callback'])
 def test_a_node_that_hangs_after_ctrl_c_still_exits(tmp_path, hang_in):
     """run_node: a node that hangs after Ctrl-C, in its clean-up or in the executor, says so and exits
-    CLEAN_UP_LIMIT after (no orphan left behind its launcher, and within the launcher's SIGINT grace)."""
+    STOP_LIMIT after (no orphan left behind its launcher, and within the launcher's SIGINT grace)."""
     script = tmp_path / 'stuck.py'
     script.write_text(STUCK_NODE_SCRIPT)
     result = run_mvpose('exec', 'python', script, hang_in, timeout=30)

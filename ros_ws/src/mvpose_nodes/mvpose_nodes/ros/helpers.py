@@ -24,7 +24,7 @@ SPIN_PERIOD = 0.1  # [s] the longest a node takes to see a shutdown
 # node once ignored SIGINT and then SIGTERM until its launcher killed it (1 of 10 fresh-clone test runs).
 # Shorter than the 5 s a launcher gives a node after SIGINT before it sends SIGTERM (`launch --sigint-timeout`,
 # as ros2 launch's), so that such a hang still ends as a clean stop.
-CLEAN_UP_LIMIT = 3.0
+STOP_LIMIT = 3.0
 
 # Reliable, transient-local, depth 1: calibration, and the last skeleton for late subscribers.
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
@@ -82,21 +82,21 @@ def run_node(make_node, args=None):
 
 
 def watch_stop(context, name):
-    """A daemon thread that ends the process CLEAN_UP_LIMIT seconds after `context` was shut down, if it still
+    """A daemon thread that ends the process STOP_LIMIT seconds after `context` was shut down, if it still
     runs then. rclpy's signal handler shuts the context down from a thread of its own on Ctrl-C and SIGTERM, so
     this holds wherever the main thread hangs: in the executor or in the clean-up."""
     def watch():
         while context.ok():
             time.sleep(SPIN_PERIOD)
-        time.sleep(CLEAN_UP_LIMIT)
-        abandon_clean_up(name)
+        time.sleep(STOP_LIMIT)
+        abandon_stop(name)
     threading.Thread(target=watch, name='stop watchdog', daemon=True).start()
 
 
-def abandon_clean_up(name):
+def abandon_stop(name):
     """A node that hangs after it was asked to stop (watch_stop): say it and end the process, which frees what
     it held."""
-    print(f'[WARN] {name}: still running {CLEAN_UP_LIMIT:g} s after it was asked to stop (hung in rclpy); '
+    print(f'[WARN] {name}: still running {STOP_LIMIT:g} s after it was asked to stop (hung in rclpy); '
           'exiting without cleaning up', file=sys.stderr, flush=True)
     os._exit(0)
 
