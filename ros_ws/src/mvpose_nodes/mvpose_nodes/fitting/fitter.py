@@ -4,7 +4,8 @@ Per frame: start from the previous frame's pose, moved on at the pelvis's veloci
 frame, after a jump in time and after the fit has lost the person (much of the outline unexplained
 for lost_frames fits), from an initialisation (initialisation.py: the 2D keypoints triangulated across
 views, turned into angles by paper 004's method, bone lengths from the template scaled to the
-estimated height, the legs' length measured); label left and right (limb_sides.py); then six
+estimated height, the legs' length measured); label left and right (limb_sides.py; at a start, limbs
+fitted on the torso's wrong side are put on their own and fitted again: SkeletonFitter.sided); then six
 Nelder–Mead searches (Sec. 5.1, stage_search.py): torso, head and neck, left arm, right arm, left leg,
 right leg, each over its own parameters with the rest fixed, each minimising its own objective. Paper
 000 Sec. 5.3: local minima are avoided by starting each limb stage from whichever fits better of the
@@ -23,8 +24,8 @@ from mvpose_nodes.body.model import JOINT_INDEX, LABEL_TORSO, STAGE_NAMES
 from mvpose_nodes.fitting.compiled import MAP_LABELS, nearest_capsules, pack_frame
 from mvpose_nodes.fitting.initialisation import (PAIRED_LIMBS, completed_joints, labelled_joints, person_lengths,
                                                  stature, triangulated_joints, upright)
-from mvpose_nodes.fitting.limb_sides import (FacingWatch, LimbTracks, exchange, face_votes, facing_travel,
-                                             foot_evidence, mirrored_joints, oriented_view)
+from mvpose_nodes.fitting.limb_sides import (SWAPPABLE, FacingWatch, LimbTracks, exchange, face_votes, facing_travel,
+                                             foot_evidence, mirrored_joints, oriented_view, wrong_sided)
 from mvpose_nodes.fitting.objective import boundary_distances, outline_of
 from mvpose_nodes.fitting.settings import FitterSettings
 from mvpose_nodes.fitting.stage_search import CAPSULE_ENDS, StageSearch, stage_indices
@@ -118,6 +119,8 @@ class SkeletonFitter:
             self.measure(found)
         parameters, results = self.search_stages(parameters, views, found)
         joints, _ = forward_kinematics(parameters, self.lengths)
+        if initialised:
+            parameters, results, joints = self.sided(parameters, results, joints, views)
         self.facing.append(foot_evidence(views, joints))
         if self.facing.wrong():  # turn round: the same points, every pair the other way
             for limb in PAIRED_LIMBS:
@@ -133,6 +136,26 @@ class SkeletonFitter:
         self.lost_fits = self.lost_fits + 1 if unexplained > settings.lost_share else 0
         return Fit(joints, parameters, results, initialised, time.perf_counter() - started,
                    unexplained if self.lost_fits >= settings.lost_frames else 0.0)
+
+    def sided(self, parameters, results, joints, views):
+        """At a (re)start, where the pairs were labelled by a cue as rough as the face (initial_parameters):
+        the groups of limbs fitted on the torso's wrong side (limb_sides.wrong_sided) exchanged and the stages
+        searched again from there. Returns (parameters, results, joints)."""
+        groups = wrong_sided(joints)
+        if not groups:
+            return parameters, results, joints
+        exchanged = joints.copy()
+        for group in groups:
+            for name in SWAPPABLE[group]:
+                pair = [JOINT_INDEX[f'left_{name}'], JOINT_INDEX[f'right_{name}']]
+                exchanged[pair] = joints[pair[::-1]]
+        self.tracks.exchanges += len(groups)
+        # Started from the exchanged pose, with it as the frame's joints too: the stages' own choice between
+        # the two (search_stages) would go back, as the objective explains either labelling about as well.
+        found = {name: exchanged[JOINT_INDEX[name]] for name in ('pelvis', 'neck', 'head', *(
+            f'{side}_{limb}' for limb in PAIRED_LIMBS for side in ('left', 'right')))}
+        parameters, results = self.search_stages(inverse_kinematics(exchanged), views, found)
+        return parameters, results, forward_kinematics(parameters, self.lengths)[0]
 
     def search_stages(self, parameters, views, found):
         """The six stages of paper 000 Sec. 5.1 from `parameters` (29,), each limb stage started from

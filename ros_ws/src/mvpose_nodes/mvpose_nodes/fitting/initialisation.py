@@ -140,15 +140,13 @@ def stature(lengths):
 
 def person_lengths(joints, settings):
     """Bone lengths of the person in triangulated joints {name: (3,) [m]} (a first frame set, or an upright
-    one: SkeletonFitter.measure): the template scaled to the height (head above the ankles), then the legs
+    one: SkeletonFitter.measure): the template scaled to the height (the head above the floor_height), then the legs
     and the head measured (the template's proportions are an average person's; a measurement within
     ±length_trust of the template's value is believed).
     The legs: a standing or stance leg is nearly straight, so the longer pelvis–ankle distance is
     about √(hip² + (thigh + shin)²); the knee keypoints are too rough to split it (features.py
     takes them from a band of the silhouette), so the template's thigh : shin proportion is kept."""
-    height = joints['head'][2] - floor_height(joints, settings)
-    if 'left_ankle' in joints or 'right_ankle' in joints:
-        height /= 1 - settings.ankle_height
+    height = joints['head'][2] - floor_height(joints, settings)   # the floor is already below the ankles
     lengths = bone_lengths(float(np.clip(height, 1.2, 2.2)))
     reach = max((np.linalg.norm(joints[n] - joints['pelvis']) for n in ('left_ankle', 'right_ankle') if n in joints),
                 default=0.0)

@@ -123,6 +123,20 @@ class LimbTracks:
                 self.exchanges += 1
 
 
+def wrong_sided(joints):
+    """The SWAPPABLE groups ('legs', 'arms') of joints (15, 3) [m] whose left limb lies on the torso's right:
+    the group's mean offset of left minus right joints along the torso's right (the hip line, horizontal)
+    is positive. Hips and shoulders are 18–45 cm apart, so outside a crossing step or crossed arms each
+    limb of a pair stays on its own side; the fitted torso's yaw comes from the outline (hips' and
+    shoulders' widths), not from the pairs' labels."""
+    right = joints[JOINT_INDEX['right_hip']] - joints[JOINT_INDEX['left_hip']]
+    right[2] = 0.0
+    right /= max(np.linalg.norm(right), 1e-9)
+    return [group for group, names in SWAPPABLE.items()
+            if np.mean([np.dot(joints[JOINT_INDEX[f'left_{n}']] - joints[JOINT_INDEX[f'right_{n}']], right)
+                        for n in names]) > 0]
+
+
 def facing_travel(parameters, lengths, right, yaw_limit):
     """The parameters (29,) with the torso turned about the vertical to face the direction of travel
     (`right`: the person's right from LimbTracks.walking_right, or None when not walking) if the torso's
