@@ -1,15 +1,16 @@
 """Front or back from the feet (issue 13): limb_sides.foot_evidence on rendered silhouettes, and the
 fitter turning a backward fit round (limb_sides.FacingWatch) on a walk and on a turn on the spot, where
-the direction of travel cannot help. Keypoints are exact and the silhouettes the studio's true masks, so
-what is tested is the cue and the turning, not the features (those: the suite, test_commands.py)."""
+the direction of travel cannot help; and a start's legs put on the fitted torso's sides. Keypoints are
+exact and the silhouettes the studio's true masks, so what is tested is the cues and the turning, not the
+features (those: the suite, test_commands.py)."""
 import math
 
 import numpy as np
 import pytest
 
 from mvpose_nodes.body.camera import studio_rig
-from mvpose_nodes.body.model import JOINT_NAMES
 from mvpose_nodes.body.kinematics import inverse_kinematics
+from mvpose_nodes.body.model import JOINT_NAMES
 from mvpose_nodes.fitting.fitter import SkeletonFitter, View
 from mvpose_nodes.fitting.limb_sides import foot_evidence, mirrored_joints, torso_forward
 from mvpose_nodes.fitting.settings import FitterSettings
@@ -79,7 +80,6 @@ def test_without_the_feet_a_turn_on_the_spot_stays_backwards(turn):
     """The check above can fail: with the feet ignored, nothing turns a person who does not travel round."""
     right = fit_turned_round(turn, FitterSettings(facing_flip_evidence=1e6))
     assert not any(right[WITHIN:]), right
-
 
 
 def legs_crossed_start(frames, monkeypatch):
