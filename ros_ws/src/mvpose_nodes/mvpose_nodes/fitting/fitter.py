@@ -25,7 +25,8 @@ from mvpose_nodes.fitting.compiled import MAP_LABELS, nearest_capsules, pack_fra
 from mvpose_nodes.fitting.initialisation import (PAIRED_LIMBS, completed_joints, labelled_joints, person_lengths,
                                                  stature, triangulated_joints, upright)
 from mvpose_nodes.fitting.limb_sides import (SWAPPABLE, FacingWatch, LimbTracks, exchange, face_votes, facing_travel,
-                                             foot_evidence, mirrored_joints, oriented_view, wrong_sided)
+                                             exchanged_pairs, foot_evidence, mirrored_joints, oriented_view,
+                                             wrong_sided)
 from mvpose_nodes.fitting.objective import boundary_distances, outline_of
 from mvpose_nodes.fitting.settings import FitterSettings
 from mvpose_nodes.fitting.stage_search import CAPSULE_ENDS, StageSearch, stage_indices
@@ -144,11 +145,7 @@ class SkeletonFitter:
         groups = wrong_sided(joints)
         if not groups:
             return parameters, results, joints
-        exchanged = joints.copy()
-        for group in groups:
-            for name in SWAPPABLE[group]:
-                pair = [JOINT_INDEX[f'left_{name}'], JOINT_INDEX[f'right_{name}']]
-                exchanged[pair] = joints[pair[::-1]]
+        exchanged = exchanged_pairs(joints, [name for group in groups for name in SWAPPABLE[group]])
         self.tracks.exchanges += len(groups)
         # Started from the exchanged pose, with it as the frame's joints too: the stages' own choice between
         # the two (search_stages) would go back, as the objective explains either labelling about as well.

@@ -117,9 +117,7 @@ class LimbTracks:
             if np.mean(offsets) > 0:
                 for name in names:
                     exchange(found, name)
-                    pair = [JOINT_INDEX[f'left_{name}'], JOINT_INDEX[f'right_{name}']]
-                    for _, joints in self.history:
-                        joints[pair] = joints[pair[::-1]]
+                self.history = [(t, exchanged_pairs(joints, names)) for t, joints in self.history]
                 self.exchanges += 1
 
 
@@ -265,14 +263,19 @@ def foot_evidence(views, joints):
     return float(evidence)
 
 
+def exchanged_pairs(joints, names):
+    """A copy of joints (15, 3) [m] with the left/right pair of each of `names` ('knee', …) exchanged."""
+    exchanged = joints.copy()
+    for name in names:
+        pair = [JOINT_INDEX[f'left_{name}'], JOINT_INDEX[f'right_{name}']]
+        exchanged[pair] = joints[pair[::-1]]
+    return exchanged
+
+
 def mirrored_joints(joints):
     """joints (15, 3) [m] with every left/right pair exchanged: the same points, the torso facing the
     other way."""
-    mirrored = joints.copy()
-    for name in ('hip', 'knee', 'ankle', 'shoulder', 'elbow', 'wrist'):
-        pair = [JOINT_INDEX[f'left_{name}'], JOINT_INDEX[f'right_{name}']]
-        mirrored[pair] = joints[pair[::-1]]
-    return mirrored
+    return exchanged_pairs(joints, ('hip', 'knee', 'ankle', 'shoulder', 'elbow', 'wrist'))
 
 
 class FacingWatch:
