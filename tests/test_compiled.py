@@ -11,7 +11,7 @@ from mvpose_nodes.body.camera import studio_rig
 from mvpose_nodes.body.kinematics import bone_lengths, forward_kinematics, inverse_kinematics
 from mvpose_nodes.body.model import STAGE_NAMES
 from mvpose_nodes.fitting.compiled import bone_length_array, forward_joints, pack_frame
-from mvpose_nodes.fitting.fitter import view_from_features
+from mvpose_nodes.fitting.fitter import frame_set_arena, view_from_features
 from mvpose_nodes.fitting.settings import FitterSettings
 from mvpose_nodes.fitting.stage_search import JOINT_LIMITS, STAGE_PARAMETERS, StageSearch, stage_indices
 from mvpose_nodes.ros.params import default_skin_model_path
@@ -26,22 +26,29 @@ RELATIVE = 1e-9
 
 
 @pytest.fixture(scope='module', params=[0.0, -0.05], ids=['pinhole', 'barrel'])
-def walk_frame(request, cmu_walk):
-    """(truth joints (15, 3), [fitter.View]) of one walking frame in cameras 2, 5 and 7 at 960×540, the
-    views from the feature pipeline; the rig with radial distortion k1 as the parameter."""
+def walk_features(request, cmu_walk):
+    """(truth joints (15, 3), [(camera, vision.features.Features)]) of one walking frame in cameras 2, 5 and
+    7 at 960×540 through the feature pipeline; the rig with radial distortion k1 as the parameter."""
     motion = cmu_walk.placed(heading=math.radians(30))
     i = len(motion.joints) // 2
     pose = scene.BodyPose(motion.joints[i], motion.toes[i], motion.hand_tips[i], motion.head_forward[i])
     extractor = FeatureExtractor(FeatureSettings(), SkinModel.load(default_skin_model_path()))
-    views = []
+    found = []
     for camera in studio_rig((960, 540), cameras=[2, 5, 7]):
         camera = camera.__class__(**{**camera.__dict__, 'D': np.array([request.param, 0.0, 0.0, 0.0, 0.0])})
         view = scene.prepare_camera(camera)
         rgb, _ = scene.Realism().finish(scene.render(view, pose, scene.Appearance()), view, camera.number, 0, 0)
-        features = extractor(rgb)
-        views.append(view_from_features(camera, features.visible_keypoints(), features.contour, features.frontness))
+        found.append((camera, extractor(rgb)))
+    return motion.joints[i], found
+
+
+@pytest.fixture(scope='module')
+def walk_frame(walk_features):
+    """(truth joints (15, 3), [fitter.View]) of walk_features' frame."""
+    truth, found = walk_features
+    views = [view_from_features(camera, f.visible_keypoints(), f.contour, f.frontness) for camera, f in found]
     assert all(view.distances is not None and view.distances.widths for view in views)
-    return motion.joints[i], views
+    return truth, views
 
 
 def reference_objective(search, stage, parameters, start, views, assigned):
@@ -123,6 +130,33 @@ def test_compiled_nelder_mead_takes_scipys_steps(walk_frame, stage):
                                            SAMPLES, flags)
         assert evaluations == reference.nfev and (budget > 100 or evaluations == budget)
         assert np.array_equal(x, reference.x) and cost == reference.fun
+
+
+def test_maps_made_in_one_arena_reach_the_search_without_a_copy_and_unchanged(walk_features, walk_frame):
+    """A frame set's views made in one MapArena (as the skeleton_fitter node makes them): pack_frame passes
+    the arena itself to the search, and every field of the FramePack reads the same values as with
+    views that have maps of their own (which pack_frame copies together)."""
+    truth, found = walk_features
+    arena = frame_set_arena([f.contour for _, f in found])
+    in_arena = [view_from_features(camera, f.visible_keypoints(), f.contour, f.frontness, arena=arena)
+                for camera, f in found]
+    packed, reference = pack_frame(in_arena), pack_frame(walk_frame[1])
+    assert packed.boundary is arena.buffer and packed.outside is arena.buffer
+    offsets = ('outside', 'outside_at', 'boundary', 'boundary_at')
+    for name in reference._fields:
+        if name not in offsets:
+            assert np.array_equal(getattr(packed, name), getattr(reference, name)), name
+
+    def same_map(buffer, start, other, other_start, shape):
+        size = int(np.prod(shape))
+        return np.array_equal(buffer[start:start + size], other[other_start:other_start + size])
+    for v in range(len(found)):
+        assert same_map(packed.outside, packed.outside_at[v], reference.outside, reference.outside_at[v],
+                        reference.outside_shape[v])
+        for k in np.flatnonzero(reference.slot[v]):
+            for side in range(2):
+                assert same_map(packed.boundary, packed.boundary_at[v, k, side], reference.boundary,
+                                reference.boundary_at[v, k, side], reference.boundary_shape[v])
 
 
 def test_nearest_capsules_equal_the_minimum_of_the_residuals():

@@ -135,16 +135,32 @@ class StagePack(NamedTuple):
 
 
 def _joined(buffers):
-    """One float32 array of the distinct arrays in `buffers` (None: none), and each one's start in it: the
-    array itself, without a copy, when they are all the same."""
-    distinct = {id(b): b for b in buffers if b is not None}
+    """One float32 array holding the arrays in `buffers` (None: none), and each one's start in it: without
+    a copy when they all lie in one contiguous float32 array (a MapArena's, or one and the same array),
+    else their concatenation."""
+    present = [b for b in buffers if b is not None]
+    if not present:
+        return np.zeros(0, np.float32), [0] * len(buffers)
+    roots = {id(_root(b)): _root(b) for b in present}
+    if len(roots) == 1:
+        root = next(iter(roots.values()))
+        if root.dtype == np.float32 and root.flags.c_contiguous and all(b.flags.c_contiguous for b in present):
+            first, flat = root.ctypes.data, root if root.ndim == 1 else root.reshape(-1)
+            return flat, [(b.ctypes.data - first) // root.itemsize if b is not None else 0 for b in buffers]
+    distinct = {id(b): b for b in present}
     starts, total = {}, 0
     for key, buffer in distinct.items():
         starts[key] = total
         total += buffer.size
-    joined = (next(iter(distinct.values())).ravel() if len(distinct) == 1 else
-              np.concatenate([b.ravel() for b in distinct.values()]) if distinct else np.zeros(0, np.float32))
+    joined = np.concatenate([b.ravel() for b in distinct.values()])
     return joined, [starts[id(b)] if b is not None else 0 for b in buffers]
+
+
+def _root(array):
+    """The array that owns the memory `array` views (itself if it owns it)."""
+    while array.base is not None and isinstance(array.base, np.ndarray):
+        array = array.base
+    return array
 
 
 def pack_frame(views):

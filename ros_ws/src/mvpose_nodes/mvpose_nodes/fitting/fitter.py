@@ -27,7 +27,7 @@ from mvpose_nodes.fitting.initialisation import (PAIRED_LIMBS, completed_joints,
 from mvpose_nodes.fitting.limb_sides import (SWAPPABLE, FacingWatch, LimbTracks, exchange, face_votes, facing_travel,
                                              exchanged_pairs, foot_evidence, mirrored_joints, oriented_view,
                                              wrong_sided)
-from mvpose_nodes.fitting.objective import boundary_distances, outline_of
+from mvpose_nodes.fitting.objective import MapArena, boundary_distances, map_floats, outline_of
 from mvpose_nodes.fitting.settings import FitterSettings
 from mvpose_nodes.fitting.stage_search import CAPSULE_ENDS, StageSearch, stage_indices
 from mvpose_nodes.vision.contour import SIDE_A, SIDE_B, ContourLabels
@@ -247,16 +247,22 @@ def unexplained_share(views, joints):
     return float(np.median(shares)) if shares else 0.0
 
 
-def view_from_features(camera, keypoints, contour, frontness=None, skin=None):
+def view_from_features(camera, keypoints, contour, frontness=None, skin=None, arena=None):
     """A View of one camera from its features: keypoints {name: (x, y, confidence)} (the visible ones),
     its ContourLabels (or None), its frontness and its skin regions [(x, y, area)] (the skin ellipses'
-    centres [px] and areas [px²])."""
+    centres [px] and areas [px²]); its distance maps in `arena` (objective.MapArena, sized by
+    frame_set_arena) if given."""
     distances = outline = None
     if contour is not None and len(contour.points):
-        distances = boundary_distances(contour, (camera.width, camera.height), MAP_LABELS)
-        outline = outline_of(contour.points)
+        distances = boundary_distances(contour, (camera.width, camera.height), MAP_LABELS, arena=arena)
+        outline = outline_of(contour.points, arena=arena)
     skin = None if skin is None else np.asarray(skin, float).reshape(-1, 3)
     return View(camera, distances, keypoints, frontness, outline, skin)
+
+
+def frame_set_arena(contours):
+    """The objective.MapArena for the views of a frame set's ContourLabels (None for a camera without)."""
+    return MapArena(sum(map_floats(c.points, 2 * len(MAP_LABELS)) for c in contours if c is not None))
 
 
 def warm_up():

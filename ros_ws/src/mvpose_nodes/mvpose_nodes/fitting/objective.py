@@ -31,6 +31,32 @@ BILINEAR_STEPS = 32   # map look-ups resolve 1/32 px, as cv2.remap (INTER_BITS =
 MAP_COARSENING = 2
 
 
+class MapArena:
+    """float32 memory for the distance maps of one frame set's views, handed out as consecutive slices of
+    one array: compiled.pack_frame then passes the views' maps to the search as that array, without
+    copying them together (which took 3–10 ms per frame set on a busy machine). `floats`: an upper bound of
+    what the maps take (map_floats); beyond it, maps get memory of their own (and are copied)."""
+
+    def __init__(self, floats):
+        self.buffer = np.empty(int(floats), np.float32)   # untouched pages cost nothing: a bound will do
+        self.used = 0
+
+    def take(self, count):
+        """A (count,) float32 slice not handed out before."""
+        if self.used + count > len(self.buffer):
+            return np.empty(count, np.float32)
+        self.used += count
+        return self.buffer[self.used - count:self.used]
+
+
+def map_floats(contour_points, map_count):
+    """An upper bound of the floats that `map_count` boundary maps (boundary_distances) and the Outline's
+    map (outline_of) of one contour (N, 2) [px] take."""
+    extent = np.ptp(contour_points, axis=0) + 1 if len(contour_points) else np.zeros(2, int)
+    return (map_count * int(np.prod(extent + 2 * MAP_MARGIN_PX))
+            + int(np.prod(extent + 2 * OUTLINE_MARGIN_PX)))
+
+
 @dataclass(frozen=True)
 class BoundaryDistances:
     """One camera's distance maps for one frame.
@@ -98,9 +124,9 @@ def bilinear(distance_map, local):
     return top + fy * (bottom - top) + outside
 
 
-def boundary_distances(contour_labels, image_size, labels=None, margin=MAP_MARGIN_PX):
+def boundary_distances(contour_labels, image_size, labels=None, margin=MAP_MARGIN_PX, arena=None):
     """BoundaryDistances of one camera's ContourLabels for the parts in `labels` (default: every label
-    with pixels on both sides). image_size: (width, height) [px]. One cv2.distanceTransform (DIST_L2,
+    with pixels on both sides), their maps in `arena` (a MapArena) if given. image_size: (width, height) [px]. One cv2.distanceTransform (DIST_L2,
     DIST_MASK_PRECISE: exact Euclidean distances) per (label, side) on a mask that is 0 on that side's
     boundary pixels, restricted to the contour's box, on a grid MAP_COARSENING times coarser (a boundary
     pixel moves by half a pixel), resized bilinearly into the BoundaryDistances' buffer: the maps are
@@ -115,7 +141,8 @@ def boundary_distances(contour_labels, image_size, labels=None, margin=MAP_MARGI
     shape = (int(y1 - y0 + 1), int(x1 - x0 + 1))
     present = [(label, side) for label in labels for side in (SIDE_A, SIDE_B)
                if np.any((part_labels == label) & (sides == side))]
-    buffer = np.empty(len(present) * shape[0] * shape[1], np.float32)
+    floats = len(present) * shape[0] * shape[1]
+    buffer = np.empty(floats, np.float32) if arena is None else arena.take(floats)
     maps, widths, offsets, side_pixels = {}, {}, {}, {}
     for index, (label, side) in enumerate(present):
         pixels = points[(part_labels == label) & (sides == side)] - (x0, y0)
@@ -211,15 +238,17 @@ class Outline:
     origin: tuple
 
 
-def outline_of(contour_points, step=OUTLINE_STEP, margin=OUTLINE_MARGIN_PX):
-    """The Outline of an ordered closed contour (N, 2) [px] (x, y) (ContourLabels.points); the silhouette
-    is the contour's filled polygon (so the node, which receives only the contour, sees the same)."""
+def outline_of(contour_points, step=OUTLINE_STEP, margin=OUTLINE_MARGIN_PX, arena=None):
+    """The Outline of an ordered closed contour (N, 2) [px] (x, y) (ContourLabels.points), its map in
+    `arena` (a MapArena) if given; the silhouette is the contour's filled polygon (so the node, which
+    receives only the contour, sees the same)."""
     points = np.asarray(contour_points)
     x0, y0 = points.min(axis=0) - margin
     x1, y1 = points.max(axis=0) + margin
     inside = np.zeros((y1 - y0 + 1, x1 - x0 + 1), np.uint8)
     cv2.drawContours(inside, [(points - (x0, y0)).reshape(-1, 1, 2).astype(np.int32)], -1, 1, cv2.FILLED)
-    outside = cv2.distanceTransform(1 - inside, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+    outside = None if arena is None else arena.take(inside.size).reshape(inside.shape)
+    outside = cv2.distanceTransform(1 - inside, cv2.DIST_L2, cv2.DIST_MASK_PRECISE, dst=outside)
     return Outline(points[::step].astype(float), outside, (int(x0), int(y0)))
 
 

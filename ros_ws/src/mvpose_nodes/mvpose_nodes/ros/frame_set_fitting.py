@@ -16,7 +16,7 @@ from mvpose_msgs.msg import LabelledContour, Skeleton
 
 from mvpose_nodes.body.kinematics import bone_lengths, forward_kinematics
 from mvpose_nodes.body.model import PARAMETER_NAMES
-from mvpose_nodes.fitting.fitter import SkeletonFitter, view_from_features
+from mvpose_nodes.fitting.fitter import SkeletonFitter, frame_set_arena, view_from_features
 from mvpose_nodes.fitting.initialisation import TEMPLATE_HEIGHT, guessed_parameters
 from mvpose_nodes.ros.conversions import (contour_from_message, keypoints_from_messages, skeleton_message,
                                           stage_messages)
@@ -65,7 +65,7 @@ class FrameSetFitter:
         """The first half of `fit` (same arguments): the messages converted into the views' evidence
         (distance maps, outlines, keypoints). A PreparedSet for fit_prepared; the node runs the two
         halves in two threads, so that one frame set's maps are made while the previous one is fitted."""
-        problems, views = [], []
+        problems, converted = [], []
         for number in self.cameras:
             if number not in features:
                 continue
@@ -79,9 +79,11 @@ class FrameSetFitter:
                     problems.append((f'contour {number}', f'/cam{number}/labelled_contour: {error}; dropped'))
                     continue
                 skin = [(e.center_x, e.center_y, e.area) for e in ellipses.ellipses]
-                keypoints = keypoints_from_messages(ellipses, contour)
-            with self.clock('distance maps'):
-                views.append(view_from_features(camera, keypoints, labels, ellipses.face_visibility, skin))
+                converted.append((camera, keypoints_from_messages(ellipses, contour), labels,
+                                  ellipses.face_visibility, skin))
+        with self.clock('distance maps'):
+            arena = frame_set_arena([labels for _, _, labels, _, _ in converted])
+            views = [view_from_features(*parts, arena=arena) for parts in converted]
         return PreparedSet(stamp_ns, views, problems, tuple(missing_cameras))
 
     def fit_prepared(self, prepared, skipped=0):
