@@ -117,19 +117,25 @@ def walk_found(motion, frame, rng, swap):
     return found
 
 
-def test_limb_tracks_correct_a_wrong_start_and_keep_the_sides_through_a_walk(cmu_walk):
+@pytest.mark.parametrize('direction', ['forwards', 'backwards'])
+def test_limb_tracks_correct_a_wrong_start_and_keep_the_sides_through_a_walk(cmu_walk, direction):
     """Started the wrong way round (no face seen), the pairs are put right once the person is seen
-    walking (within 0.2 s) and then stay right through the strides, whatever the triangulation's order."""
-    from mvpose_nodes.fitting.limb_sides import LimbTracks
+    walking (within 0.2 s) and then stay right through the strides, whatever the triangulation's order;
+    also walking backwards (the walk played back), where the torso (fitted facing the right way: here
+    the truth's) says which side of the walk is the person's right."""
+    import dataclasses
+    from mvpose_nodes.fitting.limb_sides import LimbTracks, torso_right
     from mvpose_nodes.fitting.settings import FitterSettings
     motion = cmu_walk.placed()
+    if direction == 'backwards':
+        motion = dataclasses.replace(motion, joints=motion.joints[::-1].copy())
     rng = np.random.default_rng(3)
     tracks = LimbTracks(FitterSettings())
     wrong = []
     for frame in range(60):
         swap = {limb: bool(rng.integers(2)) for limb in ('knee', 'ankle', 'elbow', 'wrist')}
         found = walk_found(motion, frame, rng, swap if frame else dict.fromkeys(swap, True))
-        tracks.label(frame / 25.0, found)
+        tracks.label(frame / 25.0, found, torso_right(motion.joints[frame]))
         joints = motion.joints[frame].copy()
         for name, position in found.items():
             joints[JOINT_NAMES.index(name)] = position   # the fit follows the labelled joints

@@ -26,7 +26,7 @@ from mvpose_nodes.fitting.initialisation import (PAIRED_LIMBS, completed_joints,
                                                  stature, triangulated_joints, upright)
 from mvpose_nodes.fitting.limb_sides import (SWAPPABLE, FacingWatch, LimbTracks, exchange, face_votes, facing_travel,
                                              exchanged_pairs, foot_evidence, mirrored_joints, oriented_view,
-                                             wrong_sided)
+                                             torso_right, wrong_sided)
 from mvpose_nodes.fitting.objective import MapArena, boundary_distances, map_floats, outline_of
 from mvpose_nodes.fitting.settings import FitterSettings
 from mvpose_nodes.fitting.stage_search import CAPSULE_ENDS, StageSearch, stage_indices
@@ -116,7 +116,7 @@ class SkeletonFitter:
                 parameters = turned
                 self.turns += 1
         if found is not None:
-            self.tracks.label(stamp, found)
+            self.tracks.label(stamp, found, torso_right(forward_kinematics(parameters, self.lengths)[0]))
             self.measure(found)
         parameters, results = self.search_stages(parameters, views, found)
         joints, _ = forward_kinematics(parameters, self.lengths)

@@ -34,15 +34,16 @@ class LimbTracks:
     - continuity: the labelling whose points lie nearer the positions predicted from the last two fitted
       poses at constant velocity; decisive while the two limbs are far apart (mid-stride), weak when
       they pass each other;
-    - sides: while the person walks (pelvis faster than walking_speed over walking_baseline), the
-      direction of travel is forward and the left limb lies to its left; knees and ankles are 5–20 cm
-      apart sideways all through a walk (CMU 07_01), elbows more.
+    - sides: while the person walks (pelvis faster than walking_speed over walking_baseline), the left
+      limb lies to the left of the direction of travel, or to its right when the torso the fit starts
+      from faces against it (someone walking backwards: the faces or the feet turned the fit round);
+      knees and ankles are 5–20 cm apart sideways all through a walk (CMU 07_01), elbows more.
     The evidence of each, in metres: continuity (d(a, p_r)² + d(b, p_l)² − d(a, p_l)² − d(b, p_r)²) /
     continuity_scale, the sides' the lateral offset of the "left" point to the right; the labelling is
     exchanged when their sum says so. Until the person is first seen walking (after a (re)start), the
     labels come from the face (initialisation.labelled_joints) or are a guess: continuity would keep
     a wrong guess, so on that first walking frame each group (legs, arms) is labelled by its mean lateral
-    offset over the remembered fits alone. Someone walking backwards would be labelled mirrored.
+    offset over the remembered fits alone.
     settings: FitterSettings (walking_speed, walking_baseline, continuity_scale).
     """
 
@@ -84,9 +85,14 @@ class LimbTracks:
         speed = np.linalg.norm(velocity)
         return np.cross(velocity / speed, [0.0, 0.0, 1.0]) if speed > self.settings.walking_speed else None
 
-    def label(self, stamp, found):
-        """Exchange, in `found` ({joint: (3,)} triangulated), the pairs that belong the other way round."""
+    def label(self, stamp, found, torso):
+        """Exchange, in `found` ({joint: (3,)} triangulated), the pairs that belong the other way round.
+        torso: the right (3,) (torso_right) of the pose the frame's fit starts from: a torso that faces
+        against the direction of travel (someone walking backwards, as the faces or the feet said) has
+        its right on the walk's left."""
         right = self.walking_right()
+        if right is not None and np.dot(right, torso) < 0:
+            right = -right
         if right is not None and not self.anchored:
             self.anchor(right, found)
         predicted = self.predicted(stamp)
@@ -121,15 +127,20 @@ class LimbTracks:
                 self.exchanges += 1
 
 
+def torso_right(joints):
+    """The person's right (3,): the horizontal unit vector from the left hip to the right hip of joints (15, 3)."""
+    right = joints[JOINT_INDEX['right_hip']] - joints[JOINT_INDEX['left_hip']]
+    right[2] = 0.0
+    return right / max(np.linalg.norm(right), 1e-9)
+
+
 def wrong_sided(joints):
     """The SWAPPABLE groups ('legs', 'arms') of joints (15, 3) [m] whose left limb lies on the torso's right:
     the group's mean offset of left minus right joints along the torso's right (the hip line, horizontal)
     is positive. Hips and shoulders are 18–45 cm apart, so outside a crossing step or crossed arms each
     limb of a pair stays on its own side; the fitted torso's yaw comes from the outline (hips' and
     shoulders' widths), not from the pairs' labels."""
-    right = joints[JOINT_INDEX['right_hip']] - joints[JOINT_INDEX['left_hip']]
-    right[2] = 0.0
-    right /= max(np.linalg.norm(right), 1e-9)
+    right = torso_right(joints)
     return [group for group, names in SWAPPABLE.items()
             if np.mean([np.dot(joints[JOINT_INDEX[f'left_{n}']] - joints[JOINT_INDEX[f'right_{n}']], right)
                         for n in names]) > 0]
@@ -145,8 +156,8 @@ def facing_travel(parameters, lengths, right, yaw_limit):
     if right is None:
         return parameters, False
     joints, _ = forward_kinematics(parameters, lengths)
-    torso_right = joints[JOINT_INDEX['right_hip']] - joints[JOINT_INDEX['left_hip']]
-    turn = np.arctan2(right[1], right[0]) - np.arctan2(torso_right[1], torso_right[0])
+    hips = torso_right(joints)
+    turn = np.arctan2(right[1], right[0]) - np.arctan2(hips[1], hips[0])
     turn = (turn + np.pi) % (2 * np.pi) - np.pi
     if abs(turn) <= yaw_limit:
         return parameters, False
@@ -224,10 +235,7 @@ def face_votes(views, joints):
 
 def torso_forward(joints):
     """The horizontal unit vector (3,) the torso of joints (15, 3) [m] faces: up × (right hip − left hip)."""
-    right = joints[JOINT_INDEX['right_hip']] - joints[JOINT_INDEX['left_hip']]
-    forward = np.cross([0.0, 0.0, 1.0], right)
-    forward[2] = 0.0
-    return forward / max(np.linalg.norm(forward), 1e-9)
+    return np.cross([0.0, 0.0, 1.0], torso_right(joints))
 
 
 FOOT_REACH = 0.14   # [m] probe points this far ahead of and behind each ankle: on the shoe ahead, past the heel
