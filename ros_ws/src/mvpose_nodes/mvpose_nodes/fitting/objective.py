@@ -126,11 +126,11 @@ def bilinear(distance_map, local):
 
 def boundary_distances(contour_labels, image_size, labels=None, margin=MAP_MARGIN_PX, arena=None):
     """BoundaryDistances of one camera's ContourLabels for the parts in `labels` (default: every label
-    with pixels on both sides), their maps in `arena` (a MapArena) if given. image_size: (width, height) [px]. One cv2.distanceTransform (DIST_L2,
-    DIST_MASK_PRECISE: exact Euclidean distances) per (label, side) on a mask that is 0 on that side's
-    boundary pixels, restricted to the contour's box, on a grid MAP_COARSENING times coarser (a boundary
-    pixel moves by half a pixel), resized bilinearly into the BoundaryDistances' buffer: the maps are
-    within a pixel of the exact distances."""
+    with pixels on both sides), their maps in `arena` (a MapArena) if given. image_size: (width, height)
+    [px]. One cv2.distanceTransform (DIST_L2, DIST_MASK_PRECISE: exact Euclidean distances) per
+    (label, side) on a mask that is 0 on that side's boundary pixels, restricted to the contour's box, on a
+    grid MAP_COARSENING times coarser (a boundary pixel moves by half a pixel), resized bilinearly into the
+    BoundaryDistances' buffer: the maps are within a pixel of the exact distances."""
     points, part_labels, sides = contour_labels.points, contour_labels.labels, contour_labels.sides
     if labels is None:
         labels = set(part_labels[sides == SIDE_A].tolist()) & set(part_labels[sides == SIDE_B].tolist())
