@@ -10,9 +10,8 @@ import pytest
 
 from mvpose_nodes.body.camera import studio_rig
 from mvpose_nodes.body.kinematics import inverse_kinematics
-from mvpose_nodes.body.model import JOINT_NAMES
 from mvpose_nodes.fitting.fitter import SkeletonFitter, View
-from mvpose_nodes.fitting.limb_sides import foot_evidence, mirrored_joints, torso_forward
+from mvpose_nodes.fitting.limb_sides import exchanged_pairs, foot_evidence, mirrored_joints, torso_forward
 from mvpose_nodes.fitting.settings import FitterSettings
 
 from common import rendered_views
@@ -90,10 +89,7 @@ def legs_crossed_start(frames, monkeypatch):
     from mvpose_nodes.body.kinematics import lengths_of
     swapped = []
     for truth, views in frames:
-        crossed = truth.copy()
-        for name in ('knee', 'ankle'):
-            pair = [JOINT_NAMES.index(f'left_{name}'), JOINT_NAMES.index(f'right_{name}')]
-            crossed[pair] = truth[pair[::-1]]
+        crossed = exchanged_pairs(truth, ('knee', 'ankle'))
         monkeypatch.setattr(SkeletonFitter, 'initial_parameters', lambda self, views: inverse_kinematics(crossed))
         fit = SkeletonFitter(lengths=lengths_of(truth[None])).fit(0.0, views)
         swapped.append(bool(swapped_pairs(fit.joints[None], truth[None])[0, :2].any()))
