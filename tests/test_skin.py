@@ -104,6 +104,16 @@ def test_adding_invalidates_the_cached_table():
     assert not (model.add(image, skin).log_likelihood == 0).all()
 
 
+def test_merging_models_counts_as_adding_their_images_to_one():
+    merged = SkinModel.empty().add(*scene(0))
+    table = merged.log_likelihood
+    merged.merge(SkinModel.empty().add(*scene(1)))
+    together = SkinModel.empty().add(*scene(0)).add(*scene(1))
+    assert np.array_equal(merged.skin_counts, together.skin_counts)
+    assert np.array_equal(merged.background_counts, together.background_counts)
+    assert merged.log_likelihood is not table and np.array_equal(merged.log_likelihood, together.log_likelihood)
+
+
 def test_detection_on_a_fresh_image_has_f1_above_0_95(model):
     image, truth = scene(100)
     precision, recall, f1 = f1_score(detect_skin(model, image), truth)

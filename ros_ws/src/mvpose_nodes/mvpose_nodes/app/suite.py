@@ -177,7 +177,8 @@ def pose_at(motion, position):
 
 
 def render_camera(case, view, motion, index):
-    """One camera's 8-bit RGB image of frame `index`, at its jittered instant, through JPEG."""
+    """One camera's image of frame `index`, at its jittered instant: RGB (H, W, 3) uint8 through JPEG, and its
+    ground-truth labels (H, W) uint8 (scene.Rendering.labels: body part, SKIN_BIT on skin)."""
     import cv2
     from mvpose_nodes.studio import scene
     from mvpose_nodes.studio.i3dpost import FRAME_RATE
@@ -187,7 +188,7 @@ def render_camera(case, view, motion, index):
     rendering = scene.render(view, pose, case.appearance, shadow, centre)
     rgb, _ = case.realism.finish(rendering, view, number, case.seed, index)
     ok, data = cv2.imencode('.jpg', cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR), [cv2.IMWRITE_JPEG_QUALITY, case.jpeg_quality])
-    return cv2.cvtColor(cv2.imdecode(data, cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB)
+    return cv2.cvtColor(cv2.imdecode(data, cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB), rendering.labels
 
 
 def run_case(case, true_lengths=False, features_cache=None):
@@ -248,7 +249,7 @@ def case_features(case, motion, cache=None):
             for view in views:
                 number = view.camera.number
                 header = set_stamp(Header(), stamp, optical_frame(number))
-                features = extractors[number](render_camera(case, view, motion, index))
+                features = extractors[number](render_camera(case, view, motion, index)[0])
                 messages[number] = tuple(map(serialize_message, feature_messages(features, header)))
             serialised.append((stamp, messages))
         if path is not None:
@@ -319,7 +320,7 @@ def pictures(worst, output):
     index = int(np.nanargmax(per_frame)) if np.isfinite(per_frame).any() else 0
     motion = case_motion(case)
     cameras = {c.number: c for c in case.rig if c.number in case.cameras}
-    images = {k: render_camera(case, scene.prepare_camera(cameras[k], texture_seed=k), motion, index)
+    images = {k: render_camera(case, scene.prepare_camera(cameras[k], texture_seed=k), motion, index)[0]
               for k in case.cameras}
     fitted = worst.joints[index] if np.isfinite(worst.joints[index]).all() else None
     sheet = contact_sheet(images, cameras, fitted, worst.truth[index],

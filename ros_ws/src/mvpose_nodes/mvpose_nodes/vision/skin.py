@@ -64,7 +64,7 @@ class SkinModel:
     the log ratio of the class sizes and call unseen colours skin whenever skin pixels are fewer.
     L is finite everywhere; a class with no pixels at all is uniform.
 
-    Counts change only through `add` (which drops the cached table).
+    Counts change only through `add` and `merge` (which drop the cached table).
     """
     skin_counts: np.ndarray
     background_counts: np.ndarray
@@ -110,6 +110,13 @@ class SkinModel:
         _check_mask(valid, index.shape, 'valid_mask')
         for counts, selected in ((self.skin_counts, valid & skin_mask), (self.background_counts, valid & ~skin_mask)):
             counts += np.bincount(index[selected], minlength=BINS ** 3).reshape(_SHAPE)
+        self._table = None
+        return self
+
+    def merge(self, other):
+        """Add the counts of another SkinModel (e.g. one trained in another process). Returns self."""
+        self.skin_counts += other.skin_counts
+        self.background_counts += other.background_counts
         self._table = None
         return self
 
