@@ -122,13 +122,15 @@ def test_skin_train_command_and_its_errors(tmp_path):
     assert_one_line_error(run_mvpose('skin', 'train', tmp_path / 'nothing', '-o', tmp_path / 'x.npz', check=False),
                           'nothing')
     assert_one_line_error(run_mvpose('skin', 'train', '-o', tmp_path / 'x.npz', check=False), '--studio')
-    assert_one_line_error(run_mvpose('skin', 'train', '--studio', -1, '-o', tmp_path / 'x.npz', check=False), '--studio')
+    assert_one_line_error(run_mvpose('skin', 'train', '--studio', -1, '-o', tmp_path / 'x.npz', check=False),
+                          '--studio')
 
 
 def test_skin_train_on_studio_renders_learns_their_skin_and_hair(tmp_path):
     """`skin train --studio 1` renders one person drawn as the suite draws them, from its first 3 cameras
     at 2 instants, and counts the skin as skin and the rest of the person (hair, clothes) and the band
-    around it as non-skin: on the first of those images, the model calls skin most skin pixels and no hair."""
+    around it as non-skin: on the first of those images, the model calls skin most skin pixels and hardly
+    any of the hair above the face."""
     from mvpose_nodes.app.skin import DEFAULT_STUDIO_SEED, STUDIO_CAMERAS, STUDIO_FRAMES, studio_pairs
     result = run_mvpose('skin', 'train', '--studio', 1, '-j', 1, '-o', tmp_path / 'model.npz', timeout=180)
     assert f'{STUDIO_CAMERAS * STUDIO_FRAMES} images' in result.stderr
