@@ -156,7 +156,7 @@ def test_maps_made_in_one_arena_reach_the_search_without_a_copy_and_unchanged(wa
         for k in np.flatnonzero(reference.slot[v]):
             for side in range(2):
                 assert same_map(packed.boundary, packed.boundary_at[v, k, side], reference.boundary,
-                                reference.boundary_at[v, k, side], reference.boundary_shape[v])
+                                reference.boundary_at[v, k, side], reference.boundary_shape[v, k])
 
 
 def test_nearest_capsules_equal_the_minimum_of_the_residuals():

@@ -21,7 +21,8 @@ from numba import njit
 
 from mvpose_nodes.body.kinematics import BONES, LENGTH_FRACTIONS, _ANGLE_INDEX, _CHAIN, _TORSO_POSITION
 from mvpose_nodes.body.model import JOINT_INDEX, LABEL_HEAD, LABEL_LEFT_LEG, LABEL_RIGHT_LEG, LABEL_TORSO
-from mvpose_nodes.fitting.objective import BILINEAR_STEPS, INSIDE_SAMPLES, OUTLINE_STEP, SEGMENT_POINTS, _fractions
+from mvpose_nodes.fitting.objective import (BILINEAR_STEPS, INSIDE_SAMPLES, MAP_COARSENING, OUTLINE_STEP,
+                                            SEGMENT_POINTS, _fractions)
 from mvpose_nodes.vision.contour import SIDE_A, SIDE_B
 
 MAP_LABELS = (LABEL_TORSO, LABEL_HEAD, LABEL_LEFT_LEG, LABEL_RIGHT_LEG)  # the parts with labelled bones
@@ -85,8 +86,8 @@ class FramePack(NamedTuple):
     outside_origin (V, 2) (x0, y0) [px]. Boundary maps (objective.BoundaryDistances) of MAP_LABELS: slot
     (V, 4) bool (the part has both sides), boundary (M,) float32 the views' BoundaryDistances.buffer (one
     after the other, unless they share one), boundary_at (V, 4, 2) each side's map's first index in it,
-    boundary_shape (V, 2) (height, width) and boundary_origin (V, 2) (x0, y0) [px] of the view's maps (they
-    share one box), boundary_width (V, 4) [px]."""
+    boundary_shape (V, 4, 2) (height, width) on the MAP_COARSENING grid and boundary_origin (V, 4, 2)
+    (x0, y0) [px] of the part's maps (its two sides share one box), boundary_width (V, 4) [px]."""
     K: np.ndarray
     R: np.ndarray
     t: np.ndarray
@@ -169,16 +170,16 @@ def pack_frame(views):
     outside, outside_at = _joined([v.outline.outside if v.outline is not None else None for v in views])
     boundary, boundary_start = _joined([v.distances.buffer if v.distances is not None else None for v in views])
     slot, width, at = np.zeros((count, labels), np.bool_), np.zeros((count, labels)), np.zeros((count, labels, 2), np.int64)
-    shape, origin = np.zeros((count, 2), np.int64), np.zeros((count, 2))
+    shape, origin = np.zeros((count, labels, 2), np.int64), np.zeros((count, labels, 2))
     for v, view in enumerate(views):
         distances = view.distances
-        if distances is None or not distances.maps:
+        if distances is None:
             continue
-        origin[v], shape[v] = distances.origin, next(iter(distances.maps.values())).shape
         for k, label in enumerate(MAP_LABELS):
             if label not in distances.widths:
                 continue
             slot[v, k], width[v, k] = True, distances.widths[label]
+            origin[v, k], shape[v, k] = distances.origins[label], distances.maps[(label, SIDE_A)].shape
             at[v, k] = (boundary_start[v] + distances.offsets[(label, SIDE_A)],
                         boundary_start[v] + distances.offsets[(label, SIDE_B)])
     return FramePack(
@@ -215,9 +216,11 @@ def _project(frame, view, joints):
 
 @njit(cache=True, nogil=True, error_model='numpy')
 def _bilinear(buffer, at, height, width, x, y):
-    """objective.bilinear of one (height, width) map, flattened in `buffer` from index `at`, at a point
-    (x, y) in the map's pixels: bilinear inside, the nearest edge value plus the distance outside."""
-    cx, cy = min(max(x, 0.0), width - 1.0), min(max(y, 0.0), height - 1.0)
+    """objective.bilinear of one (height, width) map on the MAP_COARSENING grid, flattened in `buffer` from
+    index `at`, at a point (x, y) [px] in image pixels from the map's box origin: bilinear inside, the
+    nearest edge value plus the distance outside."""
+    gx, gy = (x + 0.5) / MAP_COARSENING - 0.5, (y + 0.5) / MAP_COARSENING - 0.5
+    cx, cy = min(max(gx, 0.0), width - 1.0), min(max(gy, 0.0), height - 1.0)
     qx, qy = int(np.rint(cx * BILINEAR_STEPS)), int(np.rint(cy * BILINEAR_STEPS))
     x0, y0 = qx // BILINEAR_STEPS, qy // BILINEAR_STEPS
     x1, y1 = min(x0 + 1, width - 1), min(y0 + 1, height - 1)
@@ -228,7 +231,7 @@ def _bilinear(buffer, at, height, width, x, y):
     v11 = np.float64(buffer[at + y1 * width + x1])
     top = v00 + fx * (v01 - v00)
     bottom = v10 + fx * (v11 - v10)
-    return top + fy * (bottom - top) + np.hypot(x - cx, y - cy)
+    return top + fy * (bottom - top) + MAP_COARSENING * np.hypot(gx - cx, gy - cy)
 
 
 @njit(cache=True, nogil=True, error_model='numpy')
@@ -309,8 +312,8 @@ def stage_objective(values, stage, frame, bone_lengths, fractions, samples, used
                 continue
             used[v] = True
             at_a, at_b = frame.boundary_at[v, slot, 0], frame.boundary_at[v, slot, 1]
-            height, width = frame.boundary_shape[v, 0], frame.boundary_shape[v, 1]
-            ox, oy = frame.boundary_origin[v, 0], frame.boundary_origin[v, 1]
+            height, width = frame.boundary_shape[v, slot, 0], frame.boundary_shape[v, slot, 1]
+            ox, oy = frame.boundary_origin[v, slot, 0], frame.boundary_origin[v, slot, 1]
             sum1 = sum2 = enclosure = 0.0
             for s in range(len(fractions)):
                 x = pixels[a, 0] + fractions[s] * (pixels[b, 0] - pixels[a, 0]) - ox

@@ -22,55 +22,64 @@ import numpy as np
 from mvpose_nodes.vision.contour import SIDE_A, SIDE_B
 
 SEGMENT_POINTS = 100  # N of Eq. 4
-MAP_MARGIN_PX = 50    # the maps reach this far beyond the contour, so fitted segments rarely leave them
-BILINEAR_STEPS = 32   # map look-ups resolve 1/32 px, as cv2.remap (INTER_BITS = 5)
-# The boundary maps are computed on a grid this many times coarser and resized (within a pixel of exact):
+MAP_MARGIN_PX = 50    # a part's maps reach this far beyond its contour pixels, so its segments rarely leave them
+BILINEAR_STEPS = 32   # map look-ups resolve 1/32 of a map cell, as cv2.remap (INTER_BITS = 5)
+# The boundary maps are computed and looked up on a grid this many times coarser (within a pixel of exact):
 # 2.7 times cheaper (1080p: 3.7 instead of 10 ms per view, the fitter's largest cost beside the fit
 # itself), and measured no worse: the demo walk 29.5 against 31.3 mm, 22 tuning cases of the suite 169
 # against 188 mm mean. OpenCV's approximate DIST_MASK_5 at full size was less cheap and worse (40 mm).
 MAP_COARSENING = 2
+# Every map starts on a 64-byte line, so that OpenCV writes every one the same way wherever it lies.
+MAP_ALIGNMENT = 16  # float32s
 
 
 class MapArena:
     """float32 memory for the distance maps of one frame set's views, handed out as consecutive slices of
-    one array: compiled.pack_frame then passes the views' maps to the search as that array, without
-    copying them together (which took 3–10 ms per frame set on a busy machine). `floats`: an upper bound of
-    what the maps take (map_floats); beyond it, maps get memory of their own (and are copied)."""
+    one array, each starting on a MAP_ALIGNMENT boundary: compiled.pack_frame then passes the views' maps to
+    the search as that array, without copying them together (which took 3–10 ms per frame set on a busy
+    machine). `floats`: an upper bound of what the maps take (map_floats); beyond it, maps get memory of
+    their own (and are copied)."""
 
     def __init__(self, floats):
-        self.buffer = np.empty(int(floats), np.float32)   # untouched pages cost nothing: a bound will do
+        # Untouched pages cost nothing: a bound will do.
+        self.buffer = np.empty(int(floats) + MAP_ALIGNMENT, np.float32)
         self.used = 0
 
     def take(self, count):
-        """A (count,) float32 slice not handed out before."""
-        if self.used + count > len(self.buffer):
-            return np.empty(count, np.float32)
-        self.used += count
-        return self.buffer[self.used - count:self.used]
+        """A (count,) float32 slice not handed out before, its first element on a MAP_ALIGNMENT boundary."""
+        count = int(count)
+        start = self.used + (-(self.buffer.ctypes.data // self.buffer.itemsize + self.used)) % MAP_ALIGNMENT
+        if start + count > len(self.buffer):
+            return MapArena(count).take(count)
+        self.used = start + count
+        return self.buffer[start:self.used]
 
 
 def map_floats(contour_points, map_count):
     """An upper bound of the floats that `map_count` boundary maps (boundary_distances) and the Outline's
-    map (outline_of) of one contour (N, 2) [px] take."""
+    map (outline_of) of one contour (N, 2) [px] take, with their alignment."""
     extent = np.ptp(contour_points, axis=0) + 1 if len(contour_points) else np.zeros(2, int)
-    return (map_count * int(np.prod(extent + 2 * MAP_MARGIN_PX))
-            + int(np.prod(extent + 2 * OUTLINE_MARGIN_PX)))
+    return (map_count * int(np.prod((extent + 2 * MAP_MARGIN_PX) // MAP_COARSENING + 2))
+            + int(np.prod(extent + 2 * OUTLINE_MARGIN_PX)) + (map_count + 2) * MAP_ALIGNMENT)
 
 
 @dataclass(frozen=True)
 class BoundaryDistances:
     """One camera's distance maps for one frame.
 
-    maps: (label, side) -> (H, W) float32 [px], the Euclidean distance from each pixel to the nearest
-    contour pixel of that part and side (only (label, side) pairs that have pixels are present), all of
-    one shape; origin: (x0, y0) [px], the image pixel of every map's element [0, 0] (all maps share one
-    box: the contour's bounding box grown by MAP_MARGIN_PX, clipped to the image). widths: label -> float [px], the Hausdorff
-    distance between the part's two boundaries: the widest the part gets (for the enclosure term).
-    buffer: (N,) float32, every map flattened one after the other (the maps are views of it; compiled.py
-    reads them there without copying), offsets: (label, side) -> the index of the map's first element.
+    maps: (label, side) -> (H, W) float32 [px], the Euclidean distance to the nearest contour pixel of that
+    part and side (only (label, side) pairs that have pixels are present) on a grid MAP_COARSENING times
+    coarser than the image's: element [i, j] is the distance at the centre of the image pixels x0 + C·j …
+    x0 + C·j + C − 1, y0 + C·i … (C = MAP_COARSENING). The two sides of a part share one box, the part's
+    contour pixels' box grown by MAP_MARGIN_PX and clipped to the image, whose first pixel is
+    origins[label] (x0, y0) [px] (a multiple of C). widths: label ->
+    float [px], the Hausdorff distance between the part's two boundaries: the widest the part gets (for the
+    enclosure term). buffer: (N,) float32, every map flattened one after the other (the maps are views of
+    it; compiled.py reads them there without copying), offsets: (label, side) -> the index of the map's
+    first element.
     """
     maps: dict
-    origin: tuple
+    origins: dict
     widths: dict
     buffer: np.ndarray = field(default_factory=lambda: np.zeros(0, np.float32), compare=False, repr=False)
     offsets: dict = field(default_factory=dict)
@@ -82,19 +91,20 @@ class BoundaryDistances:
 
         def relabelled_sides(by_side):
             return {(exchange.get(label, label), side): value for (label, side), value in by_side.items()}
-        return BoundaryDistances(relabelled_sides(self.maps), self.origin,
-                                 {exchange.get(label, label): width for label, width in self.widths.items()},
+        def relabelled(by_label):
+            return {exchange.get(label, label): value for label, value in by_label.items()}
+        return BoundaryDistances(relabelled_sides(self.maps), relabelled(self.origins), relabelled(self.widths),
                                  self.buffer, relabelled_sides(self.offsets))
 
     def distances(self, label, side, points):
         """Distances [px] (M,) float64 from points (M, 2) [px] (x, y) to the (label, side) boundary.
 
-        Bilinear interpolation inside the box, so the cost is continuous in the segment's end points. A
-        point outside the box gets the value at the nearest box point plus its distance to the box: an
+        Bilinear interpolation inside the part's box, so the cost is continuous in the segment's end points.
+        A point outside the box gets the value at the nearest box point plus its distance to the box: an
         upper bound of the true distance, exact when the nearest boundary pixel lies straight inward from
         the box edge (the margin makes that typical), and never small for a segment far off the part.
         """
-        return bilinear(self.maps[(label, side)], np.asarray(points, dtype=float) - self.origin)
+        return bilinear(self.maps[(label, side)], np.asarray(points, dtype=float) - self.origins[label])
 
     def both_sides(self, label, points):
         """(distances to SIDE_A, distances to SIDE_B) of points (M, 2)."""
@@ -102,21 +112,20 @@ class BoundaryDistances:
 
 
 def bilinear(distance_map, local):
-    """Bilinear look-up of an (H, W) or (H, W, K) float32 map at points (M, 2) [px] (x, y) in the map's own
-    pixels, in float64, with OpenCV's remap weights: positions rounded to 1/BILINEAR_STEPS px (far below
-    what the fit resolves; the fitter was measured with cv2.remap, and the objective is kept as it was). A
-    point outside the map gets the value at the nearest map point plus its distance to the map. Returns
-    (M,) or (M, K). compiled._bilinear does the same per point."""
-    height, width = distance_map.shape[:2]
-    clamped = np.clip(local, 0, (width - 1, height - 1))
-    outside = np.hypot(*(local - clamped).T)
+    """Bilinear look-up of an (H, W) float32 map on the MAP_COARSENING grid (BoundaryDistances.maps) at
+    points (M, 2) [px] (x, y) in image pixels from the map's box origin, in float64 (M,), with OpenCV's
+    remap weights: positions rounded to 1/BILINEAR_STEPS of the map's pixel (far below what the fit
+    resolves). A point outside the map gets the value at the nearest map point plus its distance to it.
+    compiled._bilinear does the same per point."""
+    height, width = distance_map.shape
+    grid = (local + 0.5) / MAP_COARSENING - 0.5   # image pixel centres in the map's pixels
+    clamped = np.clip(grid, 0, (width - 1, height - 1))
+    outside = MAP_COARSENING * np.hypot(*(grid - clamped).T)
     steps = np.rint(clamped * BILINEAR_STEPS).astype(int)
     low = steps // BILINEAR_STEPS
     high = np.minimum(low + 1, (width - 1, height - 1))
     fraction = (steps % BILINEAR_STEPS) / BILINEAR_STEPS
     fx, fy = fraction[:, 0], fraction[:, 1]
-    if distance_map.ndim == 3:
-        fx, fy, outside = fx[:, None], fy[:, None], outside[:, None]
     v00, v01 = (distance_map[low[:, 1], x].astype(float) for x in (low[:, 0], high[:, 0]))
     v10, v11 = (distance_map[high[:, 1], x].astype(float) for x in (low[:, 0], high[:, 0]))
     top = v00 + fx * (v01 - v00)
@@ -128,38 +137,46 @@ def boundary_distances(contour_labels, image_size, labels=None, margin=MAP_MARGI
     """BoundaryDistances of one camera's ContourLabels for the parts in `labels` (default: every label
     with pixels on both sides), their maps in `arena` (a MapArena) if given. image_size: (width, height)
     [px]. One cv2.distanceTransform (DIST_L2, DIST_MASK_PRECISE: exact Euclidean distances) per
-    (label, side) on a mask that is 0 on that side's boundary pixels, restricted to the contour's box, on a
-    grid MAP_COARSENING times coarser (a boundary pixel moves by half a pixel), resized bilinearly into the
-    BoundaryDistances' buffer: the maps are within a pixel of the exact distances."""
+    (label, side) on a mask that is 0 on that side's boundary pixels, restricted to the part's box (a third
+    of the whole contour's box on average, and as exact within it), on the image's grid MAP_COARSENING
+    times coarser (a boundary pixel moves by half a pixel), written into the BoundaryDistances' buffer;
+    looked up bilinearly, the maps are within a pixel of the exact distances."""
     points, part_labels, sides = contour_labels.points, contour_labels.labels, contour_labels.sides
     if labels is None:
         labels = set(part_labels[sides == SIDE_A].tolist()) & set(part_labels[sides == SIDE_B].tolist())
-    if not len(points):
-        return BoundaryDistances({}, (0, 0), {})
-    x0, y0 = np.maximum(points.min(axis=0) - margin, 0)
-    x1, y1 = np.minimum(points.max(axis=0) + margin, np.subtract(image_size, 1))
-    shape = (int(y1 - y0 + 1), int(x1 - x0 + 1))
-    present = [(label, side) for label in labels for side in (SIDE_A, SIDE_B)
+    boxes = {label: part_box(points[part_labels == label], image_size, margin) for label in labels
+             if np.any(part_labels == label)}
+    present = [(label, side) for label in boxes for side in (SIDE_A, SIDE_B)
                if np.any((part_labels == label) & (sides == side))]
-    floats = len(present) * shape[0] * shape[1]
-    buffer = np.empty(floats, np.float32) if arena is None else arena.take(floats)
+    sizes = [boxes[label][1][0] * boxes[label][1][1] for label, _ in present]
+    spans = [-(-size // MAP_ALIGNMENT) * MAP_ALIGNMENT for size in sizes]   # each map aligned in the buffer
+    buffer = (arena or MapArena(sum(spans))).take(sum(spans))
     maps, widths, offsets, side_pixels = {}, {}, {}, {}
-    for index, (label, side) in enumerate(present):
-        pixels = points[(part_labels == label) & (sides == side)] - (x0, y0)
-        coarse = np.ones((-(-shape[0] // MAP_COARSENING), -(-shape[1] // MAP_COARSENING)), np.uint8)
-        coarse[pixels[:, 1] // MAP_COARSENING, pixels[:, 0] // MAP_COARSENING] = 0
-        offsets[(label, side)] = index * shape[0] * shape[1]
-        maps[(label, side)] = buffer[offsets[(label, side)]:offsets[(label, side)] + shape[0] * shape[1]].reshape(shape)
-        coarse_map = cv2.distanceTransform(coarse, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
-        coarse_map *= MAP_COARSENING
-        cv2.resize(coarse_map, shape[::-1], dst=maps[(label, side)], interpolation=cv2.INTER_LINEAR)
+    for (label, side), size, offset in zip(present, sizes, np.cumsum([0] + spans)):
+        pixels = points[(part_labels == label) & (sides == side)] - boxes[label][0]
+        boundary = np.ones(boxes[label][1], np.uint8)
+        boundary[pixels[:, 1] // MAP_COARSENING, pixels[:, 0] // MAP_COARSENING] = 0
+        offsets[(label, side)] = int(offset)
+        maps[(label, side)] = buffer[offset:offset + size].reshape(boxes[label][1])
+        cv2.distanceTransform(boundary, cv2.DIST_L2, cv2.DIST_MASK_PRECISE, dst=maps[(label, side)])
+        maps[(label, side)] *= MAP_COARSENING
         side_pixels[(label, side)] = pixels
-    for label in labels:
+    for label in boxes:
         if (label, SIDE_A) in maps and (label, SIDE_B) in maps:
             a, b = side_pixels[(label, SIDE_A)], side_pixels[(label, SIDE_B)]
-            widths[label] = float(max(maps[(label, SIDE_B)][a[:, 1], a[:, 0]].max(),
-                                      maps[(label, SIDE_A)][b[:, 1], b[:, 0]].max()))
-    return BoundaryDistances(maps, (int(x0), int(y0)), widths, buffer, offsets)
+            widths[label] = float(max(bilinear(maps[(label, SIDE_B)], a).max(),
+                                      bilinear(maps[(label, SIDE_A)], b).max()))
+    return BoundaryDistances(maps, {label: box[0] for label, box in boxes.items()}, widths, buffer, offsets)
+
+
+def part_box(pixels, image_size, margin=MAP_MARGIN_PX):
+    """The box of a part's distance maps: its contour pixels (M, 2) [px] (x, y), M > 0, grown by `margin`
+    [px] and clipped to the image (image_size (width, height) [px]), its first corner on the
+    MAP_COARSENING grid. Returns ((x0, y0) [px], (rows, columns) of the maps on that grid)."""
+    first = np.maximum(pixels.min(axis=0) - margin, 0) // MAP_COARSENING * MAP_COARSENING
+    last = np.minimum(pixels.max(axis=0) + margin, np.subtract(image_size, 1))
+    cells = (last - first) // MAP_COARSENING + 1
+    return (int(first[0]), int(first[1])), (int(cells[1]), int(cells[0]))
 
 
 def segment_points(a, b, n=SEGMENT_POINTS):
@@ -247,8 +264,8 @@ def outline_of(contour_points, step=OUTLINE_STEP, margin=OUTLINE_MARGIN_PX, aren
     x1, y1 = points.max(axis=0) + margin
     inside = np.zeros((y1 - y0 + 1, x1 - x0 + 1), np.uint8)
     cv2.drawContours(inside, [(points - (x0, y0)).reshape(-1, 1, 2).astype(np.int32)], -1, 1, cv2.FILLED)
-    outside = None if arena is None else arena.take(inside.size).reshape(inside.shape)
-    outside = cv2.distanceTransform(1 - inside, cv2.DIST_L2, cv2.DIST_MASK_PRECISE, dst=outside)
+    outside = (arena or MapArena(inside.size)).take(inside.size).reshape(inside.shape)
+    cv2.distanceTransform(1 - inside, cv2.DIST_L2, cv2.DIST_MASK_PRECISE, dst=outside)
     return Outline(points[::step].astype(float), outside, (int(x0), int(y0)))
 
 
