@@ -39,8 +39,9 @@ def components(mask, connectivity=8):
 
 def component_box(labels, label):
     """(x, y, w, h) [px] of the pixels of `label` in labels (H, W): columns x to x + w − 1, rows y to y + h − 1."""
-    rows = np.flatnonzero((labels == label).any(axis=1))
-    columns = np.flatnonzero((labels == label).any(axis=0))
+    pixels = labels == label
+    rows = np.flatnonzero(pixels.any(axis=1))
+    columns = np.flatnonzero(pixels.any(axis=0))
     return int(columns[0]), int(rows[0]), int(columns[-1] - columns[0] + 1), int(rows[-1] - rows[0] + 1)
 
 
