@@ -58,12 +58,7 @@ class Camera:
         """Ideal normalised coordinates (N, 2) -> distorted ones (plumb_bob)."""
         if not self.D.any():
             return normalized
-        k1, k2, p1, p2, k3 = self.D
-        x, y = normalized[:, 0], normalized[:, 1]
-        r2 = x * x + y * y
-        radial = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
-        return np.stack([x * radial + 2 * p1 * x * y + p2 * (r2 + 2 * x * x),
-                         y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y], axis=1)
+        return plumb_bob(normalized, self.D)
 
     def pixels_from_normalized(self, normalized):
         return normalized @ self.K[:2, :2].T + self.K[:2, 2]
@@ -99,6 +94,17 @@ class Camera:
 
     def with_distortion(self, D):
         return replace(self, D=np.asarray(D, dtype=float))
+
+
+def plumb_bob(normalized, D):
+    """Ideal normalised coordinates (..., 2) distorted by plumb_bob coefficients D (..., 5) (k1, k2, p1, p2,
+    k3), which broadcast against them (one camera's (5,), or one row per camera)."""
+    k1, k2, p1, p2, k3 = np.moveaxis(np.asarray(D, dtype=float), -1, 0)
+    x, y = normalized[..., 0], normalized[..., 1]
+    r2 = x * x + y * y
+    radial = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
+    return np.stack([x * radial + 2 * p1 * x * y + p2 * (r2 + 2 * x * x),
+                     y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y], axis=-1)
 
 
 def look_at(number, position, target, K, width, height, world_up=(0.0, 0.0, 1.0)):

@@ -12,69 +12,78 @@ import numpy as np
 
 from mvpose_nodes.body.kinematics import LENGTH_FRACTIONS, bone_lengths, forward_kinematics
 from mvpose_nodes.body.model import JOINT_INDEX, PARAMETER_INDEX, PARAMETER_NAMES
-from mvpose_nodes.body.triangulation import best_assignment, triangulate
+from mvpose_nodes.body.triangulation import Rig, best_assignment, rms_of, triangulate_many, usable
 from mvpose_nodes.fitting.stage_search import KEYPOINT_JOINT, stage_indices
 from mvpose_nodes.vision.features import FRONT_SKIN_FRACTION
 
 PAIRED_LIMBS = ('knee', 'ankle', 'elbow', 'wrist')   # keypoints that come as a left/right pair
+TRIANGULATED = ('root', 'neck', 'head')   # keypoints of one joint each, which initialisation needs
 TEMPLATE_HEIGHT = 1.75   # [m] the stature at which ankle_height was measured on the template
 
 
 def robust_triangulate(cameras, pixels, weights, outlier_rms):
-    """A DLT triangulation (triangulation.triangulate) that leaves out the one view that disagrees: with
-    three or more views and an RMS reprojection error above outlier_rms [px], the subset without the view
-    whose removal lowers the error most is used if it brings the error under outlier_rms. pixels (V, 2)
-    [px] (NaN where unseen), weights (V,); (3,) point [m], or None."""
-    found = triangulate(cameras, pixels, weights)
-    if found is None:
-        return None
-    point, rms = found
-    usable = [i for i in range(len(cameras)) if np.all(np.isfinite(pixels[i])) and weights[i] > 0]
-    if rms > outlier_rms and len(usable) >= 3:
-        trials = []
-        for left_out in usable:
-            reduced = weights.copy()
-            reduced[left_out] = 0.0
-            trial = triangulate(cameras, pixels, reduced)
-            if trial is not None:
-                trials.append(trial)
-        best = min(trials, key=lambda t: t[1], default=None)
-        if best is not None and best[1] < outlier_rms:
-            point = best[0]
-    return point
+    """A DLT triangulation (triangulation.triangulate) that leaves out the one view that disagrees
+    (robust_points). pixels (V, 2) [px] (NaN where unseen), weights (V,); (3,) point [m], or None."""
+    points, found = robust_points(Rig.of(cameras), np.asarray(pixels, float)[None], np.asarray(weights, float)[None],
+                                  outlier_rms)
+    return points[0] if found[0] else None
+
+
+def robust_points(rig, pixels, weights, outlier_rms, normalized=None):
+    """N DLT triangulations at once (triangulation.triangulate_many), each leaving out the one view that
+    disagrees: with three or more views and an RMS reprojection error above outlier_rms [px], the views
+    without the one whose removal lowers the error most are used if they bring it under outlier_rms.
+    pixels (N, V, 2) [px] (NaN where unseen), weights (N, V), normalized (N, V, 2) their Rig.normalized
+    coordinates if known. Returns points (N, 3) [m] and found (N,) bool (2 views or more)."""
+    if normalized is None:
+        normalized = rig.normalized(np.swapaxes(pixels, 0, 1)).swapaxes(0, 1)
+    points, squared, count = triangulate_many(rig, pixels, weights, normalized)
+    rms = rms_of(squared, count)
+    retried = np.flatnonzero((count >= 3) & (rms > outlier_rms))
+    if len(retried):
+        views = pixels.shape[1]
+        left_out = np.repeat(weights[retried], views, axis=0)   # (R V, V): each point with each view left out
+        left_out[np.arange(len(left_out)), np.tile(np.arange(views), len(retried))] = 0.0
+        trials, trial_squared, trial_count = triangulate_many(
+            rig, np.repeat(pixels[retried], views, axis=0), left_out, np.repeat(normalized[retried], views, axis=0))
+        trial_rms = np.where(usable(pixels[retried], weights[retried]).ravel(),   # the views there are to leave out
+                             rms_of(trial_squared, trial_count), np.inf).reshape(len(retried), views)
+        best = np.argmin(trial_rms, axis=1)
+        better = trial_rms[np.arange(len(retried)), best] < outlier_rms
+        points[retried[better]] = trials.reshape(len(retried), views, 3)[better, best[better]]
+    return points, count >= 2
 
 
 def triangulated_joints(views, settings):
     """{joint: (3,) [m]} triangulated from the views' keypoints, or None without root, neck and head in
     two views. Each left/right pair is assigned consistently across the views, but which of the two
     is the person's left is not decided here (labelled_joints and limb_sides.LimbTracks do)."""
-    cameras = [view.camera for view in views]
-
-    def pixels(name):
-        return np.array([view.keypoints.get(name, (np.nan, np.nan, 0))[:2] for view in views], float)
-
-    def weights(name):
-        return np.array([view.keypoints.get(name, (0, 0, 0.0))[2] for view in views], float)
-    joints = {}
-    for name in ('root', 'neck', 'head'):
-        found = robust_triangulate(cameras, pixels(name), weights(name), settings.outlier_rms)
-        if found is None:
-            return None
-        joints[KEYPOINT_JOINT.get(name, name)] = found
-    for limb in PAIRED_LIMBS:
-        left_pixels, right_pixels = pixels(f'left_{limb}'), pixels(f'right_{limb}')
-        pair_weights = np.column_stack([weights(f'left_{limb}'), weights(f'right_{limb}')])
-        pair = best_assignment(cameras, left_pixels, right_pixels, pair_weights)
-        if pair is None:
+    rig = Rig.of(view.camera for view in views)
+    names = TRIANGULATED + tuple(f'{side}_{limb}' for limb in PAIRED_LIMBS for side in ('left', 'right'))
+    pixels = np.array([[view.keypoints.get(name, (np.nan, np.nan, 0))[:2] for name in names] for view in views],
+                      float).reshape(len(views), len(names), 2)   # (V, names, 2)
+    weights = np.array([[view.keypoints.get(name, (0, 0, 0.0))[2] for name in names] for view in views],
+                       float).reshape(len(views), len(names))
+    normalized = rig.normalized(pixels)
+    single = slice(0, len(TRIANGULATED))
+    points, found = robust_points(rig, pixels[:, single].swapaxes(0, 1), weights[:, single].T, settings.outlier_rms,
+                                  normalized[:, single].swapaxes(0, 1))
+    if not found.all():
+        return None
+    joints = {KEYPOINT_JOINT.get(name, name): point for name, point in zip(TRIANGULATED, points)}
+    for index, limb in enumerate(PAIRED_LIMBS):
+        pair = slice(len(TRIANGULATED) + 2 * index, len(TRIANGULATED) + 2 * index + 2)   # left, right
+        assigned = best_assignment(rig.cameras, pixels[:, pair.start], pixels[:, pair.start + 1], weights[:, pair],
+                                   rig, normalized[:, pair])
+        if assigned is None:
             continue
-        swaps = pair[2]
-        observed = np.where(swaps[:, None], right_pixels, left_pixels), np.where(swaps[:, None], left_pixels, right_pixels)
-        observed_weights = np.where(swaps, pair_weights[:, 1], pair_weights[:, 0]), np.where(swaps, pair_weights[:, 0], pair_weights[:, 1])
-        left, right_point = (robust_triangulate(cameras, p, w, settings.outlier_rms)
-                             for p, w in zip(observed, observed_weights))
-        if left is None or right_point is None:
-            continue
-        joints[f'left_{limb}'], joints[f'right_{limb}'] = left, right_point
+        swapped = np.column_stack([assigned[2], ~assigned[2]]).astype(int)   # (V, 2): each point's observation
+        rows = np.arange(len(views))[:, None]
+        pair_points, pair_found = robust_points(
+            rig, pixels[:, pair][rows, swapped].swapaxes(0, 1), weights[:, pair][rows, swapped].T, settings.outlier_rms,
+            normalized[:, pair][rows, swapped].swapaxes(0, 1))
+        if pair_found.all():
+            joints[f'left_{limb}'], joints[f'right_{limb}'] = pair_points
     return joints
 
 
