@@ -143,7 +143,7 @@ def decode_times(frame_sets):
         for data in views.values():
             buffer = np.frombuffer(bytes(deserialize_message(data, CompressedImage).data), np.uint8)
             started = time.perf_counter()
-            image = cv2.imdecode(buffer, cv2.IMREAD_COLOR_RGB)
+            image = cv2.imdecode(buffer, cv2.IMREAD_COLOR)
             times.append(1e3 * (time.perf_counter() - started))
             if image is None:
                 raise UserError('an image of the bag does not decode')

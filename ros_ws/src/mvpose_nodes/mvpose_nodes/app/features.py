@@ -178,7 +178,7 @@ def benchmark(args, extractor):
         for rgb in frame_set.images.values():
             ok, jpeg = cv2.imencode('.jpg', cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR), [cv2.IMWRITE_JPEG_QUALITY, 90])
             started = time.perf_counter()
-            cv2.imdecode(jpeg, cv2.IMREAD_COLOR_RGB)
+            cv2.cvtColor(cv2.imdecode(jpeg, cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB)
             decode.append(time.perf_counter() - started)
             started = time.perf_counter()
             features = extractor(rgb)

@@ -188,7 +188,7 @@ def render_camera(case, view, motion, index):
     rendering = scene.render(view, pose, case.appearance, shadow, centre)
     rgb, _ = case.realism.finish(rendering, view, number, case.seed, index)
     ok, data = cv2.imencode('.jpg', cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR), [cv2.IMWRITE_JPEG_QUALITY, case.jpeg_quality])
-    return cv2.imdecode(data, cv2.IMREAD_COLOR_RGB), rendering.labels
+    return cv2.cvtColor(cv2.imdecode(data, cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB), rendering.labels
 
 
 def run_case(case, true_lengths=False, features_cache=None):

@@ -104,12 +104,11 @@ def image_from_compressed(message):
     mono = message.format.startswith('mono8')
     if not len(message.data):
         raise ValueError(f"CompressedImage has no data (format '{message.format}')")
-    # Decoded straight to RGB: the same pixels as BGR and cvtColor, without the copy (0.7 ms at 1080p).
     decoded = cv2.imdecode(np.frombuffer(bytes(message.data), np.uint8),
-                           cv2.IMREAD_GRAYSCALE if mono else cv2.IMREAD_COLOR_RGB)
+                           cv2.IMREAD_GRAYSCALE if mono else cv2.IMREAD_COLOR)
     if decoded is None:
         raise ValueError(f"CompressedImage data does not decode (format '{message.format}')")
-    return decoded
+    return decoded if mono else cv2.cvtColor(decoded, cv2.COLOR_BGR2RGB)
 
 
 def image_from_raw(message):
