@@ -7,7 +7,7 @@ import time
 
 import pytest
 
-from mvpose_nodes.fitting.sync import FrameRequests, PendingSets, SyncedSet
+from mvpose_nodes.fitting.sync import FrameRequests, PendingSets, SyncedSet, ready_to_request
 from mvpose_nodes.ros.diagnostics import StageClock, thread_cpu_seconds
 
 pytestmark = pytest.mark.pure
@@ -124,3 +124,15 @@ def test_a_request_given_up_is_asked_once_more_when_nothing_newer_came():
     assert requests.next_request(32.2, ready=False) is None and requests.retry == announced(80)
     requests.received(82 * 10**6)   # its features came late after all
     assert requests.next_request(32.3, ready=True) is None and requests.retry is None
+
+
+def test_request_overlap_names_the_stages_that_may_still_be_busy():
+    """request_overlap 2 asks as soon as nothing waits, 1 once the distance maps are free (the fit may still
+    run), 0 once both stages are free; nothing waiting before the stages comes first in every case."""
+    for maps_busy in (False, True):
+        for fit_busy in (False, True):
+            stages = (maps_busy, fit_busy)
+            assert ready_to_request(False, stages, 2)
+            assert ready_to_request(False, stages, 1) == (not maps_busy)
+            assert ready_to_request(False, stages, 0) == (not maps_busy and not fit_busy)
+            assert not any(ready_to_request(True, stages, overlap) for overlap in (0, 1, 2))

@@ -346,3 +346,12 @@ class FrameRequests:
             else:
                 return None
             return self.outstanding.synced
+
+
+def ready_to_request(waiting, busy_stages, overlap):
+    """Whether the fitter may ask the cameras for its next frame set (FrameRequests.next_request's `ready`):
+    nothing waits before its stages (`waiting`, bool), and of its stages (busy_stages: bool per stage, first
+    to last: distance maps, fit) at most the last `overlap` are still busy with the sets before. Overlapping
+    more fits more frame sets when there are cores to spare, and delays each one more when there are not
+    (the skeleton_fitter's request_overlap)."""
+    return not waiting and not any(busy_stages[:len(busy_stages) - overlap])

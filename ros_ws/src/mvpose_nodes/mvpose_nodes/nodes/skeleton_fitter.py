@@ -17,8 +17,8 @@ flushed and fitted (a bag's end); a bag played again starts them afresh.
 
 With request_frames (the default) the fitter also paces the cameras: it synchronises the stamps they
 announce on /cam<K>/frame_available (std_msgs/Header, one per image) and, each time nothing waits before
-its two stages, asks every camera for the newest announced set on /cam<K>/frame_request (std_msgs/Header,
-that camera's image stamp). Cameras that follow requests (camera_features' follow_requests) compute
+its two stages (and, with request_overlap below 2, the stages it names are idle), asks every camera for the
+newest announced set on /cam<K>/frame_request (std_msgs/Header, that camera's image stamp). Cameras that follow requests (camera_features' follow_requests) compute
 features only for those: frames the graph cannot keep up with are skipped whole, before any camera spends
 CPU on them, and counted as skipped.
 """
@@ -32,7 +32,7 @@ from std_msgs.msg import Header
 from visualization_msgs.msg import MarkerArray
 
 from mvpose_nodes.fitting.fitter import warm_up
-from mvpose_nodes.fitting.sync import FrameRequests, PendingSets
+from mvpose_nodes.fitting.sync import FrameRequests, PendingSets, ready_to_request
 from mvpose_nodes.ros.conversions import joint_state, joints_from_skeleton, skeleton_markers, stamp_ns
 from mvpose_nodes.ros.diagnostics import NodeDiagnostics
 from mvpose_nodes.ros.frame_set_fitting import FrameSetFitter
@@ -74,6 +74,7 @@ class SkeletonFitterNode(MultiCameraNode):
                                          lambda header, k=k: self.on_announcement(k, header), 10)
             self.create_timer(0.1, self.request_next)   # gives up unanswered requests
         self.last_status = None
+        self.working = {'preparing': False, 'fitting': False}   # each stage busy with a set (request_overlap)
         self.workers = {name: threading.Thread(target=work, name=name, daemon=True)
                         for name, work in (('preparing', self.preparing_loop), ('fitting', self.fitting_loop))}
         self.diagnostics = NodeDiagnostics(self, self.state, [self.clock], self.workers)
@@ -106,11 +107,14 @@ class SkeletonFitterNode(MultiCameraNode):
             self.request_next()
 
     def request_next(self):
-        """Ask the cameras for the newest announced frame set if nothing waits before the fitter's stages
-        (called from the executor and from both worker threads; rcl_publish is thread-safe)."""
+        """Ask the cameras for the newest announced frame set if nothing waits before the fitter's stages and
+        those request_overlap allows are free (called from the executor and from both worker threads;
+        rcl_publish is thread-safe)."""
         if self.requests is None:
             return
-        requested = self.requests.next_request(time.monotonic(), ready=not len(self.pending) and not len(self.prepared))
+        ready = ready_to_request(len(self.pending) or len(self.prepared),
+                                 (self.working['preparing'], self.working['fitting']), self.values['request_overlap'])
+        requested = self.requests.next_request(time.monotonic(), ready=ready)
         if requested is not None:
             for (k, _), header in requested.messages.items():
                 self.request_publishers[k].publish(header)
@@ -121,14 +125,19 @@ class SkeletonFitterNode(MultiCameraNode):
             frame_set = self.pending.take(timeout=0.5)
             if frame_set is None:
                 continue
+            self.working['preparing'] = True
             self.request_next()
             try:
                 features = {number: (self.camera(number), frame_set.messages[(number, 'skin_ellipses')],
                                      frame_set.messages[(number, 'labelled_contour')])
                             for number in self.cameras if (number, 'labelled_contour') in frame_set.messages}
-                self.prepared.put(self.fitting.prepare(frame_set.stamp_ns, features, frame_set.missing_groups))
+                prepared = self.fitting.prepare(frame_set.stamp_ns, features, frame_set.missing_groups)
+                self.working['fitting'] = True   # handed on: never a moment in neither stage
+                self.prepared.put(prepared)
             except Exception as error:   # a bug must not stop the fitting: say it, drop the set, go on
                 self.drop(frame_set.stamp_ns, error)
+            self.working['preparing'] = False
+            self.request_next()
 
     def fitting_loop(self):
         """The 'fitting' thread: PreparedSets -> published skeletons."""
@@ -137,6 +146,7 @@ class SkeletonFitterNode(MultiCameraNode):
             prepared = self.prepared.take(timeout=0.5)
             if prepared is None:
                 continue
+            self.working['fitting'] = True
             self.request_next()
             skips = self.pending.skipped + self.prepared.skipped + (self.requests.skipped if self.requests else 0)
             skipped, reported_skips = skips - reported_skips, skips
@@ -144,6 +154,8 @@ class SkeletonFitterNode(MultiCameraNode):
                 self.fit_and_publish(prepared, skipped)
             except Exception as error:
                 self.drop(prepared.stamp_ns, error)
+            self.working['fitting'] = False
+            self.request_next()
 
     def drop(self, stamp_ns, error):
         self.get_logger().error(f'frame set {stamp_ns} ns dropped: {type(error).__name__}: {error}')
