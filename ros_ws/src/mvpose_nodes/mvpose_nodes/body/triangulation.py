@@ -42,7 +42,8 @@ class Rig:
     def normalized(self, pixels):
         """Ideal normalised coordinates (C, M, 2) of distorted pixels (C, M, 2) [px] (NaN stays NaN): one
         Camera.undistort_pixels call per camera."""
-        return np.stack([camera.undistort_pixels(points).reshape(-1, 2) for camera, points in zip(self.cameras, pixels)])
+        return np.stack([camera.undistort_pixels(points).reshape(-1, 2)
+                         for camera, points in zip(self.cameras, pixels)])
 
     def squared_errors(self, points, pixels):
         """Squared reprojection errors (N, C) [px²] of world points (N, 3) [m] in every camera, against

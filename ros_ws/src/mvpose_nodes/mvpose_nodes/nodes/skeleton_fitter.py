@@ -18,9 +18,9 @@ flushed and fitted (a bag's end); a bag played again starts them afresh.
 With request_frames (the default) the fitter also paces the cameras: it synchronises the stamps they
 announce on /cam<K>/frame_available (std_msgs/Header, one per image) and, each time nothing waits before
 its two stages (and, with request_overlap below 2, the stages it names are idle), asks every camera for the
-newest announced set on /cam<K>/frame_request (std_msgs/Header, that camera's image stamp). Cameras that follow requests (camera_features' follow_requests) compute
-features only for those: frames the graph cannot keep up with are skipped whole, before any camera spends
-CPU on them, and counted as skipped.
+newest announced set on /cam<K>/frame_request (std_msgs/Header, that camera's image stamp). Cameras that
+follow requests (camera_features' follow_requests) compute features only for those: frames the graph cannot
+keep up with are skipped whole, before any camera spends CPU on them, and counted as skipped.
 """
 import threading
 import time
