@@ -28,8 +28,10 @@ BILINEAR_STEPS = 32   # map look-ups resolve 1/32 of a map cell, as cv2.remap (I
 # 2.7 times cheaper (1080p: 3.7 instead of 10 ms per view, the fitter's largest cost beside the fit
 # itself), and measured no worse: the demo walk 29.5 against 31.3 mm, 22 tuning cases of the suite 169
 # against 188 mm mean. OpenCV's approximate DIST_MASK_5 at full size was less cheap and worse (40 mm).
+# Read on that grid, in each part's own box, not resized: 18.4 -> 7.4 ms per frame set (docs/method.md).
 MAP_COARSENING = 2
-# Every map starts on a 64-byte line, so that OpenCV writes every one the same way wherever it lies.
+# Every map starts on a 64-byte line: OpenCV's vector code can round the last bit differently with the
+# destination's alignment (its resize did), and a map must not depend on where in memory it was made.
 MAP_ALIGNMENT = 16  # float32s
 
 
