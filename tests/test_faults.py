@@ -77,10 +77,12 @@ def test_a_camera_node_killed_leaves_a_degraded_fit_and_is_used_again_when_it_re
     gaps = [bag_time(b, a) for a, b in zip(stamps, stamps[1:])]
     assert max(gaps) <= CAMERA_TIMEOUT + 2 * FRAME_NS / 1e9, (gaps, recorder.received)
     after_kill = recorder.received[killed_after:]
-    degraded = [r for r in after_kill if r[3] == 'cameras used: [3, 5]']
+    # A status message may go on to say that stale frame sets were skipped (while the fitter waits
+    # camera_timeout for the silent camera, newer sets come): only its first part names the cameras.
+    degraded = [r for r in after_kill if r[3].split('; ')[0] == 'cameras used: [3, 5]']
     assert degraded, after_kill
     back = [r for r in after_kill if r[1] > degraded[-1][1]]
-    assert back and all(r[3] == '' and r[2] == 0 for r in back[-5:]), back[-5:]   # STATUS_OK: every camera
+    assert back and all(r[2] == 0 and not r[3].startswith('cameras used') for r in back[-5:]), back[-5:]   # STATUS_OK
     assert bag_time(stamps[-1], first) == pytest.approx(59 * FRAME_NS / 1e9)   # up to the bag's last frame
 
 
