@@ -65,23 +65,24 @@ def triangulated_joints(views, settings):
     weights = np.array([[view.keypoints.get(name, (0, 0, 0.0))[2] for name in names] for view in views],
                        float).reshape(len(views), len(names))
     normalized = rig.normalized(pixels)
-    single = slice(0, len(TRIANGULATED))
-    points, found = robust_points(rig, pixels[:, single].swapaxes(0, 1), weights[:, single].T, settings.outlier_rms,
-                                  normalized[:, single].swapaxes(0, 1))
+
+    def robust(columns):
+        """robust_points of the keypoints in `columns` (V, K) (each view's index into `names`): (K, 3), (K,)."""
+        rows = np.arange(len(views))[:, None]
+        return robust_points(rig, pixels[rows, columns].swapaxes(0, 1), weights[rows, columns].T,
+                             settings.outlier_rms, normalized[rows, columns].swapaxes(0, 1))
+    points, found = robust(np.tile(np.arange(len(TRIANGULATED)), (len(views), 1)))
     if not found.all():
         return None
     joints = {KEYPOINT_JOINT.get(name, name): point for name, point in zip(TRIANGULATED, points)}
     for index, limb in enumerate(PAIRED_LIMBS):
-        pair = slice(len(TRIANGULATED) + 2 * index, len(TRIANGULATED) + 2 * index + 2)   # left, right
-        assigned = best_assignment(rig.cameras, pixels[:, pair.start], pixels[:, pair.start + 1], weights[:, pair],
-                                   rig, normalized[:, pair])
+        left = len(TRIANGULATED) + 2 * index   # the pair's columns: left, left + 1 (right)
+        assigned = best_assignment(rig.cameras, pixels[:, left], pixels[:, left + 1], weights[:, left:left + 2],
+                                   rig, normalized[:, left:left + 2])
         if assigned is None:
             continue
-        swapped = np.column_stack([assigned[2], ~assigned[2]]).astype(int)   # (V, 2): each point's observation
-        rows = np.arange(len(views))[:, None]
-        pair_points, pair_found = robust_points(
-            rig, pixels[:, pair][rows, swapped].swapaxes(0, 1), weights[:, pair][rows, swapped].T, settings.outlier_rms,
-            normalized[:, pair][rows, swapped].swapaxes(0, 1))
+        # Each point's observation in each view: the view's own labels, or the other's where it was swapped.
+        pair_points, pair_found = robust(left + np.column_stack([assigned[2], ~assigned[2]]).astype(int))
         if pair_found.all():
             joints[f'left_{limb}'], joints[f'right_{limb}'] = pair_points
     return joints
