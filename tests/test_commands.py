@@ -204,6 +204,20 @@ def test_eval_suite_runs_small_cases_and_prints_every_figure(tmp_path):
     repeated = [line for line in again.stdout.splitlines() if line[:5].strip() == '1']
     assert [line.rsplit(maxsplit=1)[0] for line in repeated] == [rows[1].rsplit(maxsplit=1)[0]]   # all but fit ms
     assert {path: path.stat().st_mtime_ns for path in cache.glob('*.pkl')} == cached, 'read, not written again'
+    gapped = run_mvpose(*arguments[:-1], tmp_path / 'gapped', '--only', 1, '--gaps', 2, 3, timeout=600)
+    assert 'one frame set in every 2 or 3 (--gaps)' in gapped.stderr
+    row = next(line for line in gapped.stdout.splitlines() if line[:5].strip() == '1')
+    assert row.split()[-2] == '0', 'the frame sets passed over are not counted as unanswered'
+
+
+def test_the_suite_passes_over_frame_sets_in_the_steps_it_is_given():
+    from mvpose_nodes.app.suite import passed_over_by
+    passed_over = passed_over_by(200, [1, 2, 2, 3], seed=5)
+    fitted = np.flatnonzero(~passed_over)
+    assert fitted[0] == 0 and set(np.diff(fitted)) == {1, 2, 3}
+    assert np.array_equal(passed_over, passed_over_by(200, [1, 2, 2, 3], seed=5))
+    assert not passed_over_by(10, [1], seed=0).any()
+    assert np.flatnonzero(~passed_over_by(10, [4], seed=0)).tolist() == [0, 4, 8]
 
 
 def test_suite_features_cache_reads_back_what_it_wrote_and_recomputes_a_damaged_file(tmp_path, capsys,

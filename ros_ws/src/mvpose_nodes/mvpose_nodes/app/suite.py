@@ -53,6 +53,10 @@ def build_parser(prog):
     parser.add_argument('--true-lengths', action='store_true',
                         help="diagnosis: fit with the person's true bone lengths (from the motion) instead of "
                              'measuring them, to see how much of the error the measurement of the person costs')
+    parser.add_argument('--gaps', type=int, nargs='+', metavar='G',
+                        help='fit only some frame sets, as the skeleton_fitter does at `bag play` speed when it '
+                             'cannot keep up: each next one G frame sets on, G drawn per step (seeded by the '
+                             'case) from these, e.g. --gaps 1 2 2 3 (default: every frame set)')
     parser.add_argument('-o', '--output', type=Path, default=Path('output/suite'),
                         help='folder for the worst case\'s pictures (default output/suite)')
     parser.add_argument('--features-cache', type=Path, metavar='DIR',
@@ -96,8 +100,8 @@ def main(argv=None, prog='eval suite'):
     with exit_on_user_error(prog):
         from mvpose_nodes.app.synth import parse_resolution
         from mvpose_nodes.app.progress import Progress
-        if args.cases < 1 or args.frames < 2 or args.jobs < 1:
-            raise UserError('--cases and --jobs take at least 1, --frames at least 2')
+        if args.cases < 1 or args.frames < 2 or args.jobs < 1 or min(args.gaps or [1]) < 1:
+            raise UserError('--cases, --jobs and --gaps take at least 1, --frames at least 2')
         if args.cameras is not None and (len(set(args.cameras)) != len(args.cameras) or len(args.cameras) < 2
                                          or not all(1 <= k <= 8 for k in args.cameras)):
             raise UserError(f'--cameras takes 2 or more distinct camera numbers 1..8 (got {args.cameras})')
@@ -107,7 +111,9 @@ def main(argv=None, prog='eval suite'):
                 raise UserError(f'--only takes case numbers 0..{len(cases) - 1} of the --cases {len(cases)} drawn')
             cases = [cases[index] for index in args.only]
         print(f'[suite] {len(cases)} cases × {args.frames} frame sets, seed {args.seed}, {args.jobs} at once'
-              + (", the fitter given the true bone lengths (--true-lengths)" if args.true_lengths else ''),
+              + (", the fitter given the true bone lengths (--true-lengths)" if args.true_lengths else '')
+              + (f", the fitter given one frame set in every {' or '.join(map(str, sorted(set(args.gaps))))} "
+                 '(--gaps)' if args.gaps else ''),
               file=sys.stderr, flush=True)
         progress = Progress(len(cases), 'suite', unit='cases')
         results = []
@@ -115,7 +121,7 @@ def main(argv=None, prog='eval suite'):
         cv2.setNumThreads(1)   # no OpenCV pool thread to fork with a mutex held (as in synth.synthesize)
         with ProcessPoolExecutor(max_workers=args.jobs, initializer=end_with_parent) as pool:
             for result in pool.map(run_case, cases, [args.true_lengths] * len(cases),
-                                   [args.features_cache] * len(cases)):
+                                   [args.features_cache] * len(cases), [args.gaps] * len(cases)):
                 results.append(result)
                 progress.update()
         progress.close()
@@ -131,6 +137,12 @@ class CaseResult:
     fit_seconds: list
     joints: np.ndarray            # (F, 15, 3) [m] fitted, NaN where none
     truth: np.ndarray             # (F, 15, 3) [m]
+    passed_over: np.ndarray       # (F,) bool: frame sets not given to the fitter (--gaps)
+
+    @property
+    def unanswered(self):
+        """Frame sets given to the fitter that got no skeleton."""
+        return sum(status is None and not passed for status, passed in zip(self.statuses, self.passed_over))
 
     @property
     def errors(self):
@@ -191,10 +203,11 @@ def render_camera(case, view, motion, index):
     return cv2.cvtColor(cv2.imdecode(data, cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB), rendering.labels
 
 
-def run_case(case, true_lengths=False, features_cache=None):
-    """Render, extract and fit every frame set of a case; its CaseResult. true_lengths: the fitter is given
+def run_case(case, true_lengths=False, features_cache=None, gaps=None):
+    """Render, extract and fit the frame sets of a case; its CaseResult. true_lengths: the fitter is given
     the motion's bone lengths instead of measuring the person; features_cache: a folder for the case's
-    feature messages (case_features), or None."""
+    feature messages (case_features), or None; gaps: None to fit every frame set, else the steps [frame
+    sets] to draw from (rng seeded by case.seed) from one fitted frame set to the next, the first fitted."""
     from mvpose_nodes.body.kinematics import lengths_of
     from mvpose_nodes.fitting.settings import FitterSettings
     from mvpose_nodes.ros.conversions import joints_from_skeleton
@@ -207,13 +220,25 @@ def run_case(case, true_lengths=False, features_cache=None):
     count = len(motion.joints)
     joints = np.full((count, 15, 3), np.nan)
     statuses, seconds = [None] * count, []
+    passed_over = np.zeros(count, bool) if gaps is None else passed_over_by(count, gaps, case.seed)
     for index, (stamp, messages) in enumerate(case_features(case, motion, features_cache)):
+        if passed_over[index]:
+            continue
         result = fitting.fit(stamp, {number: (cameras[number], *pair) for number, pair in messages.items()})
         if result.message is not None:
             joints[index] = joints_from_skeleton(result.message)
             statuses[index] = result.message.status
             seconds.append(result.message.fit_time)
-    return CaseResult(case, statuses, seconds, joints, motion.joints)
+    return CaseResult(case, statuses, seconds, joints, motion.joints, passed_over)
+
+
+def passed_over_by(count, gaps, seed):
+    """(count,) bool: the frame sets a fitter that cannot keep up passes over: the first is fitted, each
+    next one a step drawn from `gaps` [frame sets] (ints ≥ 1) on, by a Generator seeded `seed`."""
+    fitted = np.cumsum(np.r_[0, np.random.default_rng(seed).choice(gaps, size=count - 1)])
+    passed_over = np.ones(count, bool)
+    passed_over[fitted[fitted < count]] = False
+    return passed_over
 
 
 def case_features(case, motion, cache=None):
@@ -285,7 +310,7 @@ def report(results):
         described = describe_case(result.case)
         per_frame = result.per_frame
         finite = per_frame[np.isfinite(per_frame)]
-        none = sum(status is None for status in result.statuses)
+        none = result.unanswered
         swaps = int(result.swapped[SWAP_GRACE_FRAMES:].sum())
         fit_ms = 1000 * np.median(result.fit_seconds) if result.fit_seconds else math.nan
         cells = (f'{np.mean(finite):6.1f} {np.median(finite):6.1f} {np.max(finite):6.1f}' if len(finite)
@@ -303,7 +328,7 @@ def report(results):
               f'{worst.case.motion}); cases over {PAPER_MEAN_MM} mm: {int(np.sum(means > PAPER_MEAN_MM))}; '
               f'swapped frames after the first {SWAP_GRACE_FRAMES}: '
               f'{sum(int(r.swapped[SWAP_GRACE_FRAMES:].sum()) for r in chosen)}; frame sets without a skeleton: '
-              f'{sum(s is None for r in chosen for s in r.statuses)}')
+              f'{sum(r.unanswered for r in chosen)}')
     joint_means = np.nanmean(np.concatenate([r.errors for r in results]), axis=0)
     print('  per joint (all cases): ' + ', '.join(f'{n} {m:.0f}' for n, m in zip(JOINT_NAMES, joint_means)))
 
