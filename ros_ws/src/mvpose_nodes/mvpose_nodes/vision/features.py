@@ -31,10 +31,15 @@ ROLE_UNKNOWN, ROLE_FACE, ROLE_HAND, ROLE_FOREARM = range(4)   # SkinEllipse.ROLE
 SIDE_NONE, SIDE_LEFT, SIDE_RIGHT = range(3)                    # SkinEllipse.SIDE_*
 WRIST_FRACTION = 0.62    # wrist along a forearm+hand skin ellipse, from the elbow end (forearm 0.27 m, hand 0.18 m)
 FOREARM_ELONGATION = 2.2  # major/minor above which a limb skin region is a forearm (sleeves 'auto')
+FOREARM_MIN_LENGTH = 0.08  # ... and its semi-major axis above this share of the stature (a hand's is about 0.05)
 FRONT_SKIN_FRACTION = 0.3  # skin share of the head above which the camera sees the face
 HEAD_FRACTION = 0.13     # head (vertex to chin) as a share of the stature
 NECK_BELOW_TOP = 0.17    # base of the neck below the head top, as a share of the stature (no face seen)
 NECK_BELOW_SKIN = 0.03   # base of the neck below the lowest skin of the neck, as a share of the stature
+NECK_BELOW_SHOULDERS = 0.04  # base of the neck below the row where the shoulders widen (silhouette.head_column)
+HEAD_REACH = 0.12        # a face's centre lies at most this share of the stature beside the head's top
+HAND_MAX_AREA = 0.02     # a hand's or forearm's skin region covers at most this share of the stature squared
+HAND_MAX_LENGTH = 0.2    # ... and its ellipse's semi-major axis at most this share of the stature
 BOX_SCALE = 4            # the person is found on an image this many times smaller, then processed in its box
 BOX_MARGIN = 0.05        # of the person's size, around its box
 # The image sizes FeatureExtractor takes [px]: the person is first found at 1/BOX_SCALE of the size, which
@@ -203,16 +208,20 @@ class FeatureExtractor:
         keypoints['root'] = Keypoint(*points.root, 0.9, True)
         face = self._face(ellipses, points)
         front = self._head(face, keypoints, silhouette, points, skin, stature)
-        hand_masks = self._hands([e for e in ellipses if e is not face], keypoints, front, skin)
+        hand_masks = self._hands([e for e in ellipses if e is not face], keypoints, front, skin, stature)
         self._legs(points, keypoints, front)
         return [e for _, e in ellipses], keypoints, hand_masks, front
 
     @staticmethod
     def _face(ellipses, points):
-        """The skin region whose centre is within the head (top HEAD_FRACTION·1.6 of the stature), highest first."""
-        head_limit = points.top[1] + 1.6 * HEAD_FRACTION * points.height
-        candidates = [e for e in ellipses if e[1].center[1] < head_limit]
-        return min(candidates, key=lambda e: e[1].center[1]) if candidates else None
+        """The skin region whose centre is within the head (HEAD_FRACTION·1.6 of the stature below its top, and
+        within HEAD_REACH of it sideways; raised hands are beside or above it), nearest to the face's middle."""
+        top_x, top_y = points.top
+        middle = np.array([top_x, top_y + 0.5 * HEAD_FRACTION * points.height])
+        candidates = [e for e in ellipses if top_y - HEAD_REACH * points.height < e[1].center[1]
+                      < top_y + 1.6 * HEAD_FRACTION * points.height
+                      and abs(e[1].center[0] - top_x) < HEAD_REACH * points.height]
+        return min(candidates, key=lambda e: np.hypot(*(np.array(e[1].center) - middle))) if candidates else None
 
     @staticmethod
     def _head(face, keypoints, silhouette, points, skin, stature):
@@ -221,32 +230,41 @@ class FeatureExtractor:
         head_rows = slice(int(top_y), int(top_y + HEAD_FRACTION * stature) + 1)
         head_pixels = silhouette[head_rows].sum()
         frontness = float(skin[head_rows].sum() / head_pixels) if head_pixels else 0.0
+        shoulders = points.shoulders
         if face is None:
             keypoints['head'] = Keypoint(top_x, top_y, 0.6, True)
-            keypoints['neck'] = Keypoint(top_x, top_y + NECK_BELOW_TOP * stature, 0.3, True)
+            keypoints['neck'] = (Keypoint(shoulders[0], shoulders[1] + NECK_BELOW_SHOULDERS * stature, 0.5, True)
+                                 if shoulders is not None else
+                                 Keypoint(top_x, top_y + NECK_BELOW_TOP * stature, 0.3, True))
             return frontness
         region, ellipse = face
         ellipse.role, ellipse.confidence = ROLE_FACE, 0.9
-        # The lower neck: where the face-and-neck skin ends (the collar), a little above the shoulder line.
-        boundary = region.boundary
-        bottom = boundary[:, 1].max()
-        collar = boundary[boundary[:, 1] >= bottom - 0.01 * stature]
-        keypoints['neck'] = Keypoint(float(collar[:, 0].mean()), float(bottom + NECK_BELOW_SKIN * stature), 0.8, True)
+        if shoulders is not None:   # the base of the neck: on the shoulders' line, between them
+            keypoints['neck'] = Keypoint(shoulders[0], shoulders[1] + NECK_BELOW_SHOULDERS * stature, 0.8, True)
+        else:   # from the side: where the face-and-neck skin ends (the collar), a little above the shoulder line
+            boundary = region.boundary
+            bottom = boundary[:, 1].max()
+            collar = boundary[boundary[:, 1] >= bottom - 0.01 * stature]
+            keypoints['neck'] = Keypoint(float(collar[:, 0].mean()), float(bottom + NECK_BELOW_SKIN * stature), 0.8, True)
         # The head top: the hair is not skin, so not the face ellipse's upper end but where the
         # silhouette ends above the face.
         keypoints['head'] = Keypoint(top_x, top_y, 0.8, True)
         return frontness
 
-    def _hands(self, limb_ellipses, keypoints, frontness, skin):
-        """Wrists and elbows from the (at most two) largest non-face skin regions."""
+    def _hands(self, limb_ellipses, keypoints, frontness, skin, stature):
+        """Wrists and elbows from the (at most two) largest non-face skin regions of a hand's or forearm's size."""
         neck = np.array([keypoints['neck'].x, keypoints['neck'].y])
-        hands = sorted(limb_ellipses, key=lambda e: -e[1].area)[:2]
+        # Skin of a hand, or a forearm and hand, is at most so large; larger regions are clothes of skin's colour.
+        plausible = [e for e in limb_ellipses if e[1].area <= HAND_MAX_AREA * stature ** 2
+                     and e[1].semi_major <= HAND_MAX_LENGTH * stature]
+        hands = sorted(plausible, key=lambda e: -e[1].area)[:2]
         found = []
         for region, ellipse in hands:
             ends = sorted((ellipse.end_a, ellipse.end_b), key=lambda k: np.hypot(k.x - neck[0], k.y - neck[1]))
             near, far = np.array([ends[0].x, ends[0].y]), np.array([ends[1].x, ends[1].y])
             forearm = self.settings.sleeves == 'short' or (
-                self.settings.sleeves == 'auto' and ellipse.semi_major > FOREARM_ELONGATION * ellipse.semi_minor)
+                self.settings.sleeves == 'auto' and ellipse.semi_major > FOREARM_ELONGATION * ellipse.semi_minor
+                and ellipse.semi_major > FOREARM_MIN_LENGTH * stature)
             if forearm:
                 ellipse.role = ROLE_FOREARM
                 wrist, elbow = near + WRIST_FRACTION * (far - near), near

@@ -23,6 +23,11 @@ ANKLE_HEIGHT = 0.03       # the ankle joint above the lowest pixel of its foot, 
                           # (4–5 % above the sole, less the sole's rise towards the camera in the image)
 SHIN_BAND = (0.06, 0.18)  # above a foot's lowest pixel: mostly the shin, whose axis leads down to the ankle
 KNEE_BAND = (0.285, 0.345)  # the knee joint lies at about 30 % of the stature
+HEAD_SCAN_SCALE = 4       # head_column follows the body's middle up on a grid this many times coarser
+HEAD_WIDTH_BAND = (0.08, 0.22)  # the head's width: the runs this share of the centroid-to-top column below the top
+SHOULDER_WIDENING = 1.8   # the shoulders' row is the first this many times as wide as the head
+TRUNK_WIDENING = 1.15     # head_column: a run wider than this times the median so far has an arm held out
+SHOULDER_DEPTH = (0.09, 0.22)  # ... and lies this share of the stature below the head's top (the template: 0.14)
 
 
 def components(mask, connectivity=8):
@@ -155,22 +160,86 @@ class SilhouetteKeypoints:
     """Keypoints of one silhouette, each (x, y) [px] or None, with a confidence in [0, 1]. The two
     legs are not yet the person's left or right: `legs` is ordered by image x (image-left first)."""
     root: tuple
-    height: float                # [px] of the silhouette's bounding box
-    top: tuple                   # the highest silhouette pixel (x, y)
+    height: float                # [px] the stature: from the head's top (`top`) down to the lowest pixel
+    top: tuple                   # the top of the head (x, y): the top of the body's middle (head_column)
     legs: list                   # per leg found: {'ankle': (x, y), 'knee': (x, y) or None, 'confidence': c}
+    shoulders: tuple = None      # the middle (x, y) of the first row where the body's middle widens to the
+                                 # shoulders (head_column), or None
 
 
 def silhouette_keypoints(mask):
-    """Root (centroid of all foreground pixels), top, and per leg the ankle and knee (paper 000 Sec. 3.1)."""
+    """Root (centroid of all foreground pixels), the head's top and the shoulders' row (head_column), and per
+    leg the ankle and knee (paper 000 Sec. 3.1)."""
     rows, columns = np.nonzero(mask)
     if rows.size == 0:
         return None
-    top_row, bottom_row = rows.min(), rows.max()
-    height = float(bottom_row - top_row + 1)
-    top_columns = columns[rows == top_row]
+    bottom_row = rows.max()
     root = (float(columns.mean()), float(rows.mean()))
+    top, shoulders = head_column(mask, root, bottom_row)
+    height = float(bottom_row - top[1] + 1)
     legs = _legs(mask, bottom_row, height)
-    return SilhouetteKeypoints(root, height, (float(top_columns.mean()), float(top_row)), legs)
+    return SilhouetteKeypoints(root, height, top, legs, shoulders)
+
+
+def head_column(mask, root, bottom=None):
+    """The top of the head and the shoulders' row of a silhouette (bool (H, W)) whose centroid is `root` (x, y):
+    from the centroid up, row by row, the run of foreground that continues the run below it (of those that
+    overlap it, the one whose middle is nearest to the trunk's: followed by at most a coarse cell a row towards
+    the middle of each run at most TRUNK_WIDENING times the median width so far, not one with an arm held out
+    or touching the head) leads up the trunk and neck to the
+    top of the head, past raised arms, which leave that run to the sides; the silhouette's highest pixel is
+    a raised hand instead. Scanned on a HEAD_SCAN_SCALE times coarser grid, then the head's highest pixel
+    found in the image over the last run. Shoulders: going back down from the top, the first row at least
+    SHOULDER_WIDENING times the head's width (the median width of the runs HEAD_WIDTH_BAND of the column's
+    length below the top), None if no row is or the first is not SHOULDER_DEPTH of the stature (from the top down
+    to `bottom`, the lowest row, or the image's) below the top (a view from the side; arms held out lower down).
+    Returns ((x, y), (x, y) or None) [px]."""
+    coarse = mask[::HEAD_SCAN_SCALE, ::HEAD_SCAN_SCALE]
+    x, row = int(root[0] // HEAD_SCAN_SCALE), min(int(root[1] // HEAD_SCAN_SCALE), coarse.shape[0] - 1)
+    left, right = x, x + 1
+    middle = x + 0.5   # of the trunk: the last run not much wider than the runs so far (not an arm held out)
+    runs, widths = [], []   # (row, first column, last column + 1) on the coarse grid, from the centroid up
+    for row in range(row, -1, -1):
+        line = np.concatenate([[False], coarse[row], [False]])
+        edges = np.flatnonzero(line[1:] != line[:-1])
+        starts, ends = edges[0::2], edges[1::2]
+        overlapping = (starts < right) & (ends > left)
+        if not overlapping.any():
+            break
+        candidates = np.flatnonzero(overlapping)
+        if (ends - starts)[candidates].max() > 1:   # a sliver of one coarse cell beside a wider run: keying noise
+            candidates = candidates[(ends - starts)[candidates] > 1]
+        chosen = candidates[np.argmin(np.abs(0.5 * (starts[candidates] + ends[candidates]) - middle))]
+        left, right = starts[chosen], ends[chosen]
+        runs.append((row, left, right))
+        widths.append(right - left)
+        if right - left <= TRUNK_WIDENING * np.median(widths):   # a cell a row at most: a lean of 45° (an arm
+            middle += np.clip(0.5 * (left + right) - middle, -1.0, 1.0)   # touching the head jumps further)
+    if not runs:
+        rows, columns = np.nonzero(mask)
+        top_row = rows.min()
+        return (float(columns[rows == top_row].mean()), float(top_row)), None
+    top_row, left, right = runs[-1]
+    # The head's highest pixel in the image, within the last coarse run (and the coarse cells above it).
+    band = mask[max(top_row * HEAD_SCAN_SCALE - HEAD_SCAN_SCALE, 0):(top_row + 1) * HEAD_SCAN_SCALE,
+                left * HEAD_SCAN_SCALE:right * HEAD_SCAN_SCALE]
+    rows, columns = np.nonzero(band)
+    first = rows.min()
+    top = (float(columns[rows == first].mean() + left * HEAD_SCAN_SCALE),
+           float(first + max(top_row * HEAD_SCAN_SCALE - HEAD_SCAN_SCALE, 0)))
+    column = np.array(runs[::-1], float)   # from the top down
+    widths = column[:, 2] - column[:, 1]
+    length = len(column)
+    head = widths[int(HEAD_WIDTH_BAND[0] * length):max(int(HEAD_WIDTH_BAND[1] * length), int(HEAD_WIDTH_BAND[0] * length) + 1)]
+    wide = np.flatnonzero(widths >= SHOULDER_WIDENING * np.median(head))
+    wide = wide[wide > int(HEAD_WIDTH_BAND[1] * length)]
+    if not len(wide):
+        return top, None
+    row, left, right = column[wide[0]]
+    stature = mask.shape[0] - top[1] if bottom is None else bottom - top[1]
+    if not SHOULDER_DEPTH[0] * stature <= row * HEAD_SCAN_SCALE - top[1] <= SHOULDER_DEPTH[1] * stature:
+        return top, None   # widening elsewhere: arms held out lower down, or a view from the side
+    return top, (float(0.5 * (left + right) * HEAD_SCAN_SCALE), float(row * HEAD_SCAN_SCALE))
 
 
 def _band_centroid(mask, bottom_row, height, band, column_range=None):
