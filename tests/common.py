@@ -186,6 +186,9 @@ def wait_for_graph(inputs=(), outputs=(), timeout=60):
 # The graph of launch/mvpose.launch.yaml: its cameras, and what a player gives them (not the ground truth).
 GRAPH_LAUNCH_FILE = 'ros_ws/src/mvpose_nodes/launch/mvpose.launch.yaml'
 GRAPH_CAMERAS = (3, 5, 7)
+# A bag rate the whole graph keeps up with on 2 cores, a start's first frame sets included: while a start's
+# labellings of the body are compared (fitting/hypotheses.py) each frame set is fitted up to 8 times, 0.5-0.7 s.
+GRAPH_RATE = 0.05
 GRAPH_INPUTS = [f'/cam{k}/{name}' for k in GRAPH_CAMERAS for name in ('image_raw/compressed', 'camera_info', 'camera_pose')]
 SKELETON_OUT = ('/skeleton_fitter', '/mvpose/skeleton')   # an output of wait_for_graph: someone receives it
 

@@ -13,7 +13,7 @@ from mvpose_nodes.body.model import STAGE_NAMES
 from mvpose_nodes.fitting.compiled import bone_length_array, forward_joints, pack_frame
 from mvpose_nodes.fitting.fitter import frame_set_arena, view_from_features
 from mvpose_nodes.fitting.settings import FitterSettings
-from mvpose_nodes.fitting.stage_search import JOINT_LIMITS, STAGE_PARAMETERS, StageSearch, stage_indices
+from mvpose_nodes.fitting.stage_search import STAGE_PARAMETERS, StageSearch, stage_indices
 from mvpose_nodes.ros.params import default_skin_model_path
 from mvpose_nodes.studio import scene
 from mvpose_nodes.vision.features import FeatureExtractor, FeatureSettings
@@ -52,18 +52,14 @@ def walk_frame(walk_features):
 
 
 def reference_objective(search, stage, parameters, start, views, assigned):
-    """StageSearch.stage_cost plus the priors, as the search's cost adds them."""
+    """StageSearch.stage_cost plus the priors (smoothness, joint and twist limits), as the search's cost adds them."""
     settings = search.settings
     indices = stage_indices(stage)
     steps = np.array([settings.step_position if name.endswith(('_x', '_y', '_z')) else settings.step_angle
                       for name in STAGE_PARAMETERS[stage]])
     total, used = search.stage_cost(stage, parameters, views, assigned)
     total += settings.smoothness_weight * np.sum(((parameters[indices] - start[indices]) / steps) ** 2)
-    for i, name in enumerate(STAGE_PARAMETERS[stage]):
-        if name in JOINT_LIMITS:
-            low, high = JOINT_LIMITS[name]
-            value = parameters[indices[i]]
-            total += settings.limit_weight * (max(low - value, 0.0) + max(value - high, 0.0)) ** 2
+    total += search.limit_cost(stage, parameters)   # joint and twist limits
     return total, sorted(used)
 
 
@@ -80,7 +76,6 @@ def test_compiled_forward_kinematics_equals_the_reference():
 def test_compiled_stage_objective_equals_the_reference_on_random_poses(walk_frame, stage):
     truth, views = walk_frame
     search = StageSearch(FitterSettings(), bone_lengths(1.75))
-    search.new_frame()
     frame = pack_frame(views)
     rng = np.random.default_rng(STAGE_NAMES.index(stage))
     true_parameters = inverse_kinematics(truth)
@@ -114,7 +109,6 @@ def test_compiled_nelder_mead_takes_scipys_steps(walk_frame, stage):
     from mvpose_nodes.fitting.stage_search import FRACTIONS, SAMPLES
     truth, views = walk_frame
     search = StageSearch(FitterSettings(), bone_lengths(1.75))
-    search.new_frame()
     frame = pack_frame(views)
     rng = np.random.default_rng(7)
     indices = stage_indices(stage)

@@ -8,14 +8,19 @@ import pytest
 from common import GRAPH_CAMERAS, GRAPH_INPUTS, SKELETON_OUT, SkeletonRecorder, wait_for_graph
 
 from mvpose_nodes.app.graph_run import graph_inputs
+from mvpose_nodes.fitting.settings import FitterSettings
 
 pytestmark = pytest.mark.graph
 
-RATE = 0.2            # the bag's speed: the graph keeps up with every frame set
+# The bag's speed: slow enough for the graph (a restarted fitter's start passes over some: STARTING_FITS), fast
+# enough that a killed camera's wall-clock silence is longer than CAMERA_TIMEOUT of bag time.
+RATE = 0.1
 CAMERA_TIMEOUT = 0.5  # [s] of bag time the fitter waits for a silent camera (skeleton_fitter's camera_timeout)
 FRAME_NS = 40_000_000
-BAG_FRAMES = '45-104'  # 60 frames: 2.4 s of bag, 12 s at RATE
-STARTING_FITS = 3     # a restarted fitter's first fits, slower: the frame sets played meanwhile are passed over
+BAG_FRAMES = '45-104'  # 60 frames: 2.4 s of bag, 24 s at RATE
+# A restarted fitter's first fits, slower (numba's cache loaded, and a start's labellings compared over
+# hypothesis_frames fits): the frame sets played meanwhile are passed over.
+STARTING_FITS = FitterSettings().hypothesis_frames + 1
 
 
 def play_into_graph(synth_bag, background, recorder):

@@ -80,17 +80,17 @@ def test_skeleton_fitter_exposes_its_settings_as_described_read_only_parameters(
     fitter = background('run', 'skeleton_fitter', '--ros-args', '-p', 'outline_gate:=25.0', '-p', 'cameras:=[2, 4]')
     node = rclpy.create_node('parameter_reader')
     try:
-        names = ['outline_gate', 'cameras', 'travel_yaw_limit_deg']
+        names = ['outline_gate', 'cameras', 'upright_tilt_deg']
         described = call(node, node.create_client(DescribeParameters, '/skeleton_fitter/describe_parameters'),
                          DescribeParameters.Request(names=names)).descriptors
         values = call(node, node.create_client(GetParameters, '/skeleton_fitter/get_parameters'),
                       GetParameters.Request(names=names)).values
     finally:
         node.destroy_node()
-    gate, cameras, yaw = described
+    gate, cameras, tilt = described
     assert '[px]' in gate.description and gate.read_only
     assert (gate.floating_point_range[0].from_value, gate.floating_point_range[0].to_value) == (0.1, 1000.0)
-    assert '[deg]' in yaw.description
+    assert '[deg]' in tilt.description
     assert 'each in [1, 99], all different' in cameras.additional_constraints
     assert values[0].type == ParameterType.PARAMETER_DOUBLE and math.isclose(values[0].double_value, 25.0)
     assert list(values[1].integer_array_value) == [2, 4]

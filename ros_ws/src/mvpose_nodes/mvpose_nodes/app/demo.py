@@ -21,7 +21,8 @@ from mvpose_nodes.tools.cli import ArgumentParser, UserError, exit_on_user_error
 DEMO_BAG = Path('bags/i3dpost_walk_synth')
 DEMO_SYNTH_ARGUMENTS = ('--cameras', '3', '5', '7', '--frames', '52-101')
 OUTPUT = Path('output/demo')
-PLAYBACK_RATE = 0.1    # of the bag's 25 frames per second: what the graph keeps up with on 2 cores
+PLAYBACK_RATE = 0.05   # of the bag's 25 frames per second: what the graph keeps up with on 2 cores, a start included
+#                        (its labellings compared: 0.5-0.7 s a frame set over its first 5, fitting/hypotheses.py)
 ANIMATION_CAMERA = 5
 
 

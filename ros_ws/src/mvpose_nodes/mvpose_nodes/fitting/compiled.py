@@ -21,6 +21,7 @@ from numba import njit
 
 from mvpose_nodes.body.kinematics import BONES, LENGTH_FRACTIONS, _ANGLE_INDEX, _CHAIN, _TORSO_POSITION
 from mvpose_nodes.body.model import JOINT_INDEX, LABEL_HEAD, LABEL_LEFT_LEG, LABEL_RIGHT_LEG, LABEL_TORSO
+from mvpose_nodes.fitting.limb_limits import euler_rotation, limb_excess
 from mvpose_nodes.fitting.objective import (BILINEAR_STEPS, INSIDE_SAMPLES, MAP_COARSENING, OUTLINE_STEP,
                                             SEGMENT_POINTS, _fractions)
 from mvpose_nodes.vision.contour import SIDE_A, SIDE_B
@@ -47,14 +48,15 @@ def bone_length_array(lengths):
 
 
 @njit(cache=True, nogil=True, error_model='numpy')
-def _euler(rx, ry, rz):
-    """kinematics.euler_matrix: Rz(rz)·Ry(ry)·Rx(rx) (paper 004 Eq. 2), 3×3."""
-    cx, sx, cy, sy, cz, sz = np.cos(rx), np.sin(rx), np.cos(ry), np.sin(ry), np.cos(rz), np.sin(rz)
-    out = np.empty((3, 3))
-    out[0, 0], out[0, 1], out[0, 2] = cz * cy, cz * sy * sx - sz * cx, cz * sy * cx + sz * sx
-    out[1, 0], out[1, 1], out[1, 2] = sz * cy, sz * sy * sx + cz * cx, sz * sy * cx - cz * sx
-    out[2, 0], out[2, 1], out[2, 2] = -sy, cy * sx, cy * cx
-    return out
+def twist_excess(parameters, bone, reference, neutral, low, high, hinge, lateral_low, lateral_high):
+    """limb_limits.limb_excess of the limb `bone` (BONES index) at 29 parameters, its child's hinge the
+    parameter index `hinge`."""
+    angles = np.zeros(3)
+    for axis in range(3):
+        if CHAIN_ANGLES[bone, axis] >= 0:
+            angles[axis] = parameters[CHAIN_ANGLES[bone, axis]]
+    return limb_excess(angles[0], angles[1], angles[2], parameters[hinge], reference, neutral, low, high,
+                       lateral_low, lateral_high)
 
 
 @njit(cache=True, nogil=True, error_model='numpy')
@@ -71,7 +73,7 @@ def forward_joints(parameters, bone_lengths):
             for axis in range(3):
                 if CHAIN_ANGLES[bone, axis] >= 0:
                     angles[axis] = parameters[CHAIN_ANGLES[bone, axis]]
-            frame = frame @ _euler(angles[0], angles[1], angles[2])
+            frame = frame @ euler_rotation(angles[0], angles[1], angles[2])
         frames[bone] = frame
         joints[CHAIN_END[bone]] = joints[CHAIN_START[bone]] + bone_lengths[bone] * (frame @ CHAIN_REST[bone])
     return joints
@@ -111,7 +113,9 @@ class StagePack(NamedTuple):
     indices, capsule_radius (K,) [m], capsule_terminal (K,) bool; assigned (V,) bool (the view has an
     outline assignment), points (P, 2) [px] and point_view (P,) the assigned outline points; bones (B,)
     bone indices with labelled boundaries and bone_slot (B,) their MAP_LABELS slot; keypoint_view,
-    keypoint_joint (Q,), keypoint_xy (Q, 2) [px], keypoint_weight (Q,); weights (10,): enclosure, outline,
+    keypoint_joint (Q,), keypoint_xy (Q, 2) [px], keypoint_weight (Q,); the limbs' twist and lateral limits
+    (stage_search.twist_arrays: twist_bones (T,), twist_reference, twist_neutral (T, 3), twist_low,
+    twist_high (T,) [rad], twist_hinge (T,), lateral_low, lateral_high (T,) [rad]); weights (10,): enclosure, outline,
     inside, outline scale, outline gate, boundary, keypoint, keypoint scale, smoothness, limit
     (FitterSettings)."""
     indices: np.ndarray
@@ -132,6 +136,14 @@ class StagePack(NamedTuple):
     keypoint_joint: np.ndarray
     keypoint_xy: np.ndarray
     keypoint_weight: np.ndarray
+    twist_bones: np.ndarray
+    twist_reference: np.ndarray
+    twist_neutral: np.ndarray
+    twist_low: np.ndarray
+    twist_high: np.ndarray
+    twist_hinge: np.ndarray
+    lateral_low: np.ndarray
+    lateral_high: np.ndarray
     weights: np.ndarray
 
 
@@ -263,6 +275,10 @@ def stage_objective(values, stage, frame, bone_lengths, fractions, samples, used
         smoothness += step * step
         beyond = max(stage.low[i] - values[i], 0.0) + max(values[i] - stage.high[i], 0.0)
         limits += beyond * beyond
+    for i in range(len(stage.twist_bones)):
+        limits += twist_excess(parameters, stage.twist_bones[i], stage.twist_reference[i], stage.twist_neutral[i],
+                               stage.twist_low[i], stage.twist_high[i], stage.twist_hinge[i],
+                               stage.lateral_low[i], stage.lateral_high[i])
     joints = forward_joints(parameters, bone_lengths)
     total = 0.0
     outline = 0.0
@@ -459,13 +475,15 @@ def nelder_mead(simplex, xatol, fatol, maxfev, stage, frame, bone_lengths, fract
 def search(simplex, xatol, fatol, maxfev, bone_lengths, fractions, samples, used,
            indices, base, start, steps, low, high, capsules, capsule_radius, capsule_terminal, assigned,
            points, point_view, bones, bone_slot, keypoint_view, keypoint_joint, keypoint_xy, keypoint_weight,
+           twist_bones, twist_reference, twist_neutral, twist_low, twist_high, twist_hinge, lateral_low, lateral_high,
            weights, K, R, t, D, has_outline, outside, outside_at, outside_shape, outside_origin, slot, boundary,
            boundary_at, boundary_shape, boundary_origin, boundary_width):
     """nelder_mead with the StagePack and FramePack given field by field: search(..., *stage, *frame).
     With maxfev 1 it evaluates the simplex's first vertex and stops: one evaluation of the objective."""
     stage = StagePack(indices, base, start, steps, low, high, capsules, capsule_radius, capsule_terminal,
                       assigned, points, point_view, bones, bone_slot, keypoint_view, keypoint_joint, keypoint_xy,
-                      keypoint_weight, weights)
+                      keypoint_weight, twist_bones, twist_reference, twist_neutral, twist_low, twist_high, twist_hinge,
+                      lateral_low, lateral_high, weights)
     frame = FramePack(K, R, t, D, has_outline, outside, outside_at, outside_shape, outside_origin, slot, boundary,
                       boundary_at, boundary_shape, boundary_origin, boundary_width)
     return nelder_mead(simplex, xatol, fatol, maxfev, stage, frame, bone_lengths, fractions, samples, used)

@@ -1,17 +1,26 @@
 """Fitting the 29-DOF skeleton to the features of several calibrated views (paper 000 Sec. 4–6).
 
-Per frame: start from the previous frame's pose, moved on at the pelvis's velocity, or, on the first
-frame, after a jump in time and after the fit has lost the person (much of the outline unexplained
-for lost_frames fits), from an initialisation (initialisation.py: the 2D keypoints triangulated across
-views, turned into angles by paper 004's method, bone lengths from the template scaled to the
-estimated height, the legs' length measured); label left and right (limb_sides.py; at a start, limbs
-fitted on the torso's wrong side are put on their own and fitted again: SkeletonFitter.sided); then six
-Nelder–Mead searches (Sec. 5.1, stage_search.py): torso, head and neck, left arm, right arm, left leg,
-right leg, each over its own parameters with the rest fixed, each minimising its own objective. Paper
-000 Sec. 5.3: local minima are avoided by starting each limb stage from whichever fits better of the
-previous frame's pose and the frame's own triangulated joints. When the feet have said for a while
-that the fit faces backwards (limb_sides.foot_evidence), the searches are done again the other way round.
-Every tuning constant is a field of settings.FitterSettings.
+Per frame set: the views' keypoints are triangulated (initialisation.triangulated_joints) and a view's
+keypoint that disagrees with the others is left out (initialisation.consistent_views). The pose follows
+from the previous frame's, moved on at the pelvis's velocity, or, on the first frame, after a jump in time
+and after the fit has lost the person (much of the outline unexplained for lost_frames fits), from an
+initialisation (initialisation.py: the keypoints' triangulation turned into angles by paper 004's
+method, bone lengths from the template scaled to the estimated height, the legs' length measured).
+Then six Nelder–Mead searches (Sec. 5.1, stage_search.py): torso, head and neck, left arm, right arm,
+left leg, right leg, each over its own parameters with the rest fixed, each minimising its own objective.
+Paper 000 Sec. 5.3 avoids local minima by good starts: each limb stage is searched from the previous
+frame's pose and from the frame's own triangulated joints, and the better result kept.
+
+Left and right, front and back (beyond the paper; hypotheses.py): the same silhouettes fit a person and
+the same points labelled the other way round, every pair exchanged (turned round), or one pair of limbs
+exchanged. With the hips' and shoulders' turn, the thighs' adduction and the upper arms' reach across the
+body limited as anatomy limits them (stage_search.TWIST_LIMITS), a bent knee or elbow no longer fits the
+wrong way, nor do limbs crossed, so
+the objective tells them apart (and the face the views see, where the pose cannot): after a start,
+every other labelling is followed beside the fit for hypothesis_frames frame sets, and the one whose
+fits explain the views best is kept; after that, one other labelling at a time is followed so, every
+probe_period frame sets, and taken when it explains the views clearly better. Every tuning constant is
+a field of settings.FitterSettings.
 """
 import time
 from dataclasses import dataclass, field
@@ -19,21 +28,25 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from mvpose_nodes.body.camera import intrinsics, look_at
-from mvpose_nodes.body.kinematics import bone_lengths, forward_kinematics, inverse_kinematics
+from mvpose_nodes.body.kinematics import BONES, bone_lengths, forward_kinematics, inverse_kinematics
 from mvpose_nodes.body.model import JOINT_INDEX, LABEL_TORSO, STAGE_NAMES
 from mvpose_nodes.fitting.compiled import MAP_LABELS, nearest_capsules, pack_frame
-from mvpose_nodes.fitting.initialisation import (PAIRED_LIMBS, completed_joints, labelled_joints, person_lengths,
-                                                 stature, triangulated_joints, upright)
-from mvpose_nodes.fitting.limb_sides import (SWAPPABLE, FacingWatch, LimbTracks, exchange, face_votes, facing_travel,
-                                             exchanged_pairs, foot_evidence, mirrored_joints, oriented_view,
-                                             torso_right, wrong_sided)
-from mvpose_nodes.fitting.objective import MapArena, boundary_distances, map_floats, outline_of
+from mvpose_nodes.fitting.hypotheses import PROBES, RELABELLINGS, START_LABELLINGS, Track, relabelled_joints
+from mvpose_nodes.fitting.initialisation import (completed_joints, consistent_views, facing_right, labelled_joints,
+                                                 person_lengths, stature, triangulated_joints, upright)
+from mvpose_nodes.fitting.limb_sides import LimbTracks, exchanged_pairs, oriented_view
+from mvpose_nodes.fitting.objective import EDGE_PX, MapArena, boundary_distances, map_floats, outline_of
 from mvpose_nodes.fitting.settings import FitterSettings
 from mvpose_nodes.fitting.stage_search import CAPSULE_ENDS, StageSearch, stage_indices
 from mvpose_nodes.vision.contour import SIDE_A, SIDE_B, ContourLabels
 
 TORSO_POSITION = stage_indices('torso')[:3]   # torso_x, torso_y, torso_z: the root's position [m]
 LOST_MARGIN = 0.25  # [m] an outline point this far from every bone is not explained by the skeleton
+# Keypoints read off the silhouette's shape (vision/silhouette.py): wrong once the image cuts the person off,
+# so left out then; but the root (the silhouette's centroid), shifted as it is, is kept at CUT_ROOT_CONFIDENCE
+# of its confidence: without it, a person cut off in every view (close to the cameras) has no start at all.
+SILHOUETTE_KEYPOINTS = ('left_knee', 'right_knee', 'left_ankle', 'right_ankle')
+CUT_ROOT_CONFIDENCE = 0.2
 
 
 @dataclass
@@ -55,7 +68,7 @@ class Fit:
     joints: np.ndarray           # (15, 3) [m]
     parameters: np.ndarray       # (29,)
     stages: list = field(default_factory=list)   # stage_search.StageResult, in STAGE_NAMES order
-    initialised: bool = False
+    initialised: bool = False    # a start: the fit is the best guess of the start's hypotheses so far
     seconds: float = 0.0
     lost: float = 0.0            # when the fit has lost the person: the outline's unexplained_share, else 0
 
@@ -68,18 +81,29 @@ class SkeletonFitter:
 
     def __init__(self, settings=None, lengths=None):
         self.settings = settings or FitterSettings()
-        self.parameters = None
         self.lengths = None if lengths is None else dict(lengths)
         # The person's measurements on upright frame sets (measure), while the lengths are not given.
         self.measurements = [] if lengths is None else None
         self.last_stamp = None
-        self.tracks = LimbTracks(self.settings)
         # The stage searches, once the person's bone lengths are known.
         self.stages = None if lengths is None else StageSearch(self.settings, self.lengths)
-        self.turns = 0   # times the torso was turned to face the direction of travel (facing_travel)
-        self.facing = FacingWatch(self.settings)
-        self.flips = 0   # times the fit was turned round because the feet pointed backwards
-        self.lost_fits = 0   # consecutive fits that left much of the outline unexplained (unexplained_share)
+        self.track = None     # the hypothesis followed as the fit (hypotheses.Track), None before a start
+        self.given = None     # the Track whose fit was given out last (during a start: the cheapest so far)
+        self.rivals = []      # other hypotheses followed beside it (hypotheses.py)
+        self.window = 0       # frame sets left before they are compared with it
+        self.starting = False  # the comparison is a start's (its fits are INITIALISING)
+        self.since_probe = 0  # frame sets since the last probe ended
+        self.probes = 0       # probes so far (which labelling is next: PROBES in turn)
+        self.switches = 0     # times a rival was taken (for diagnostics)
+        self.lost_fits = 0    # consecutive fits that left much of the outline unexplained (unexplained_share)
+        self.start_labels = None  # the start's triangulated joints, labelled (initial_parameters)
+        self.face_right = None    # this frame set's person's right as the face says (initialisation.facing_right)
+        self.legs_passed = False  # the fit's ankles have passed each other since the last probe of the legs
+
+    @property
+    def parameters(self):
+        """The 29 parameters of the last fit given out, or None before the first."""
+        return None if self.given is None else self.given.parameters
 
     def fit(self, stamp, views):
         started = time.perf_counter()
@@ -88,76 +112,129 @@ class SkeletonFitter:
         if self.last_stamp is not None and stamp < self.last_stamp and self.measurements is not None:
             # Time went back: another recording (a bag played again, or someone else's), measured afresh,
             # so that the same bag gives the same skeletons; nor is its last pose this recording's.
-            self.lengths, self.stages, self.measurements, self.parameters = None, None, [], None
+            self.lengths, self.stages, self.measurements, self.track, self.rivals = None, None, [], None, []
+            self.given = None
         self.last_stamp = stamp
-        initialised = False
-        if self.parameters is None or jump or self.lost_fits >= settings.lost_frames:
-            start = self.initial_parameters(views)
-            if start is None:
-                raise ValueError('too few views with keypoints to initialise (need root, neck and head in 2 views)')
-            self.parameters, initialised = start, True
-            self.lost_fits = 0
-            self.tracks.restart()
-            self.facing.clear()
-        self.stages.new_frame()
-        parameters = self.parameters.copy()
-        predicted = None if initialised else self.tracks.predicted(stamp)
-        if predicted is not None:  # the body moves on at its speed (5 cm a frame walking): start, and
-            # centre the smoothness prior, where it will be, not where it was
-            pelvis = JOINT_INDEX['pelvis']
-            parameters[TORSO_POSITION] += predicted[pelvis] - self.tracks.history[-1][1][pelvis]
-        found = None if initialised else triangulated_joints(views, settings)
-        if not initialised:
-            turned, turn = facing_travel(parameters, self.lengths, self.tracks.walking_right(),
-                                         np.radians(settings.travel_yaw_limit_deg))
-            # People walk forwards, unless the faces the views see say otherwise (walking backwards).
-            if turn and (face_votes(views, forward_kinematics(turned, self.lengths)[0])
-                         >= face_votes(views, forward_kinematics(parameters, self.lengths)[0])):
-                parameters = turned
-                self.turns += 1
+        found = triangulated_joints(views, settings)
+        self.face_right = None
         if found is not None:
-            self.tracks.label(stamp, found, torso_right(forward_kinematics(parameters, self.lengths)[0]))
+            views = consistent_views(views, found, settings.keypoint_gate)
             self.measure(found)
-        parameters, results = self.search_stages(parameters, views, found)
-        joints, _ = forward_kinematics(parameters, self.lengths)
-        if initialised:
-            parameters, results, joints = self.sided(parameters, results, joints, views)
-        self.facing.append(foot_evidence(views, joints))
-        if self.facing.wrong():  # turn round: the same points, every pair the other way
-            for limb in PAIRED_LIMBS:
-                exchange(found or {}, limb)
-            self.tracks.mirror()
-            self.facing.clear()
-            self.flips += 1
-            parameters, results = self.search_stages(inverse_kinematics(mirrored_joints(joints)), views, found)
-            joints, _ = forward_kinematics(parameters, self.lengths)
-        self.parameters = parameters
-        self.tracks.append(stamp, joints)
-        unexplained = unexplained_share(views, joints)
+            self.face_right = facing_right(views, found, settings.face_evidence)
+        if self.track is None or jump or self.lost_fits >= settings.lost_frames:
+            self.start(stamp, views, found)
+        else:
+            for track in [self.track] + self.rivals:
+                self.follow(track, stamp, views, found)
+            ankles = self.track.joints[[JOINT_INDEX['left_ankle'], JOINT_INDEX['right_ankle']]]
+            apart = np.linalg.norm(ankles[0] - ankles[1]) >= settings.crossing_distance
+            self.legs_passed |= not apart
+            if not self.rivals:
+                self.since_probe += 1
+                if self.legs_passed and apart:   # a stride: where continuity is least sure of the legs
+                    self.legs_passed = False
+                    self.probe(stamp, views, found, 'legs exchanged')
+                elif self.since_probe >= settings.probe_period:
+                    self.probe(stamp, views, found)
+        # While a start's hypotheses are compared, the one that explains the views best so far is given out.
+        track = min([self.track] + self.rivals, key=lambda t: t.cost) if self.starting else self.track
+        self.given = track
+        starting = self.starting
+        if self.rivals:
+            self.window -= 1
+            if self.window <= 0:
+                self.compare()
+        unexplained = unexplained_share(views, track.joints)
         self.lost_fits = self.lost_fits + 1 if unexplained > settings.lost_share else 0
-        return Fit(joints, parameters, results, initialised, time.perf_counter() - started,
+        return Fit(track.joints, track.parameters, track.results, starting, time.perf_counter() - started,
                    unexplained if self.lost_fits >= settings.lost_frames else 0.0)
 
-    def sided(self, parameters, results, joints, views):
-        """At a (re)start, where the pairs were labelled by a cue as rough as the face (initial_parameters):
-        the groups of limbs fitted on the torso's wrong side (limb_sides.wrong_sided) exchanged and the stages
-        searched again from there. Returns (parameters, results, joints)."""
-        groups = wrong_sided(joints)
-        if not groups:
-            return parameters, results, joints
-        exchanged = exchanged_pairs(joints, [name for group in groups for name in SWAPPABLE[group]])
-        self.tracks.exchanges += len(groups)
-        # Started from the exchanged pose, with it as the frame's joints too: the stages' own choice between
-        # the two (search_stages) would go back, as the objective explains either labelling about as well.
-        found = {name: exchanged[JOINT_INDEX[name]] for name in ('pelvis', 'neck', 'head', *(
-            f'{side}_{limb}' for limb in PAIRED_LIMBS for side in ('left', 'right')))}
-        parameters, results = self.search_stages(inverse_kinematics(exchanged), views, found)
-        return parameters, results, forward_kinematics(parameters, self.lengths)[0]
+    def start(self, stamp, views, found):
+        """A (re)start: the pose from the frame's keypoints (initial_parameters), fitted, and every other
+        labelling of it (hypotheses.START_LABELLINGS) fitted beside it, to be compared over the next
+        hypothesis_frames frame sets. ValueError when the keypoints are too few to start from."""
+        start = self.initial_parameters(views, found)
+        if start is None:
+            raise ValueError('too few views with keypoints to initialise (need root, neck and head in 2 views)')
+        self.track = Track(start, LimbTracks(self.settings))
+        self.follow(self.track, stamp, views, found)
+        self.rivals = [self.spawn(labelling, pairs, stamp, views, found) for labelling, pairs in START_LABELLINGS]
+        self.window, self.starting, self.lost_fits = self.settings.hypothesis_frames, True, 0
+
+    def probe(self, stamp, views, found, labelling=None):
+        """Follow `labelling` (hypotheses.RELABELLINGS; None: the next of hypotheses.PROBES) beside the fit,
+        from this frame set on."""
+        if labelling is None:
+            labelling = PROBES[self.probes % len(PROBES)]
+            self.probes += 1
+        self.track.cost = self.track.last_cost
+        self.rivals = [self.spawn(labelling, RELABELLINGS[labelling], stamp, views, found)]
+        self.window, self.since_probe = self.settings.hypothesis_frames, 0
+
+    def spawn(self, labelling, pairs, stamp, views, found):
+        """A rival Track: this frame's fit with `pairs` exchanged, fitted from there (the frame's triangulated
+        pairs exchanged alike), its cost so far that fit's."""
+        rival = self.track.relabelled(labelling, pairs)
+        rival.limbs.history = rival.limbs.history[:-1]   # this frame's fit, to be replaced by the rival's own
+        start = inverse_kinematics(exchanged_pairs(self.track.joints, pairs))
+        rival.parameters, rival.results = self.search_stages(start, views, relabelled_joints(found, pairs))
+        rival.joints, _ = forward_kinematics(rival.parameters, self.lengths)
+        rival.limbs.append(stamp, rival.joints)
+        rival.cost = rival.last_cost = self.cost_of(rival.parameters, views)
+        return rival
+
+    def compare(self):
+        """End of a window: the rival that cost the least over it replaces the fit if it cost
+        hypothesis_margin less (at a start, any less: nothing is known yet)."""
+        best = min(self.rivals, key=lambda rival: rival.cost)
+        margin = 0.0 if self.starting else self.settings.hypothesis_margin
+        if best.cost < (1 - margin) * self.track.cost:
+            self.track = best
+            self.switches += 1
+        self.track.labelling = ''
+        self.rivals, self.starting, self.since_probe = [], False, 0
+
+    def follow(self, track, stamp, views, found):
+        """Fit `track` to this frame set: from its last pose moved on at the pelvis's velocity (the
+        smoothness prior centred there too), the frame's triangulated pairs labelled by its continuity;
+        its cost for the frame added to its window's."""
+        parameters = track.parameters.copy()
+        predicted = track.limbs.predicted(stamp)
+        if predicted is not None and track.limbs.history:
+            pelvis = JOINT_INDEX['pelvis']
+            parameters[TORSO_POSITION] += predicted[pelvis] - track.limbs.history[-1][1][pelvis]
+        labelled = None
+        if found is not None and track.limbs.history:
+            labelled = dict(found)
+            track.limbs.label(stamp, labelled)
+        elif found is not None:   # a start: the pairs as initial_parameters labelled them
+            labelled = self.start_labels
+        track.parameters, track.results = self.search_stages(parameters, views, labelled)
+        track.joints, _ = forward_kinematics(track.parameters, self.lengths)
+        track.limbs.append(stamp, track.joints)
+        track.last_cost = self.cost_of(track.parameters, views)
+        track.cost += track.last_cost
+
+    def cost_of(self, parameters, views):
+        """How well the pose `parameters` (29,) explains the views: the six stages' objectives (without the
+        smoothness prior, with the joint limits) with each view's left/right labels oriented to the pose
+        and the outline assigned from it; raised by face_cost_share when the pose's hips face away from the
+        face the views see (face_right)."""
+        joints, _ = forward_kinematics(parameters, self.lengths)
+        oriented = [oriented_view(view, joints) for view in views]
+        frame = pack_frame(oriented)
+        cost = sum(self.stages.compiled_cost(stage, parameters, oriented,
+                                             self.stages.outline_assignment(stage, parameters, oriented), frame)[0]
+                   + self.stages.limit_cost(stage, parameters) for stage in STAGE_NAMES)
+        hips = joints[JOINT_INDEX['right_hip']] - joints[JOINT_INDEX['left_hip']]
+        if self.face_right is not None and np.dot(hips, self.face_right) < 0:
+            cost *= 1 + self.settings.face_cost_share
+        return cost
 
     def search_stages(self, parameters, views, found):
-        """The six stages of paper 000 Sec. 5.1 from `parameters` (29,), each limb stage started from
-        whichever fits better of them and the frame's triangulated joints `found` ({joint: (3,)} or
-        None) (Sec. 5.3). Returns the fitted parameters and the stage_search.StageResults."""
+        """The six stages of paper 000 Sec. 5.1 from `parameters` (29,); each limb stage searched also from the
+        frame's triangulated joints `found` ({joint: (3,)} or None), and the better of the two kept (Sec.
+        5.3). Returns the fitted parameters and the stage_search.StageResults."""
         reference, _ = forward_kinematics(parameters, self.lengths)
         if found is not None:
             for name, position in found.items():
@@ -167,23 +244,21 @@ class SkeletonFitter:
         frame = pack_frame(oriented)
         results = []
         for stage in STAGE_NAMES:
-            if found is not None and stage != 'torso' and candidate is None:
-                # The limbs' triangulated joints, as angles relative to the fitted torso.
-                hybrid, _ = forward_kinematics(parameters, self.lengths)
-                for name, position in found.items():
-                    if name not in ('pelvis', 'neck'):
-                        hybrid[JOINT_INDEX[name]] = position
-                candidate = inverse_kinematics(hybrid)
             assigned = self.stages.outline_assignment(stage, parameters, oriented)
+            searched, result = self.stages.search(stage, parameters, oriented, assigned, frame)
             if found is not None and stage != 'torso':
-                indices = stage_indices(stage)
+                if candidate is None:   # the limbs' triangulated joints, as angles relative to the fitted torso
+                    hybrid, _ = forward_kinematics(parameters, self.lengths)
+                    for name, position in found.items():
+                        if name not in ('pelvis', 'neck'):
+                            hybrid[JOINT_INDEX[name]] = position
+                    candidate = inverse_kinematics(hybrid)
                 alternative = parameters.copy()
-                alternative[indices] = candidate[indices]
-                pack = self.stages.stage_pack(stage, parameters, oriented, assigned, priors=False)
-                if (self.stages.compiled_cost(stage, alternative, oriented, assigned, frame, pack)[0]
-                        < self.stages.compiled_cost(stage, parameters, oriented, assigned, frame, pack)[0]):
-                    parameters = alternative
-            parameters, result = self.stages.search(stage, parameters, oriented, assigned, frame)
+                alternative[stage_indices(stage)] = candidate[stage_indices(stage)]
+                other, other_result = self.stages.search(stage, alternative, oriented, assigned, frame)
+                if other_result.cost < result.cost:
+                    searched, result = other, other_result
+            parameters = searched
             results.append(result)
         return parameters, results
 
@@ -200,32 +275,21 @@ class SkeletonFitter:
         self.measurements.append(person_lengths(joints, self.settings))
         tallest = max(stature(m) for m in self.measurements)
         standing = [m for m in self.measurements if stature(m) >= (1 - self.settings.stature_spread) * tallest]
-        self.lengths = {key: float(np.median([m[key] for m in standing])) for key in self.lengths}
+        self.lengths = {key: float(np.median([m[key] for m in standing])) for key in standing[0]}
         self.stages = StageSearch(self.settings, self.lengths)
 
-    def initial_parameters(self, views):
-        """Angles (29,) from triangulated keypoints (paper 000 Sec. 3.1 and 6; paper 004), or None: the
-        pairs labelled by the face where a view sees it (initialisation.labelled_joints), or all the other
-        way round (the torso facing the other way) when the skin in the views' heads says so better
-        (limb_sides.face_votes). The first initialisation also measures the person
-        (initialisation.person_lengths)."""
-        joints = labelled_joints(views, self.settings)
-        if joints is None:
+    def initial_parameters(self, views, found):
+        """Angles (29,) from the frame's triangulated joints `found` (paper 000 Sec. 3.1 and 6; paper 004), or
+        None without them: the pairs labelled by the face where a view sees it (initialisation.labelled_joints;
+        the hypotheses try the other labellings), the rest completed from the template. The first
+        initialisation also measures the person (initialisation.person_lengths)."""
+        if found is None:
             return None
+        self.start_labels = labelled_joints(views, found, self.settings)
         if self.lengths is None:  # measured whatever the posture, until an upright frame set measures better
-            self.lengths = person_lengths(joints, self.settings)
+            self.lengths = person_lengths(found, self.settings)
             self.stages = StageSearch(self.settings, self.lengths)
-        self.measure(joints)
-        mirrored = dict(joints)
-        for limb in PAIRED_LIMBS:
-            exchange(mirrored, limb)
-        starts = [completed_joints(labelled, self.lengths) for labelled in (joints, mirrored)]
-        feet = foot_evidence(views, starts[0])
-        if abs(feet) >= self.settings.facing_evidence:
-            best = 0 if feet > 0 else 1
-        else:
-            best = max(range(2), key=lambda k: (face_votes(views, starts[k]), -k))
-        return inverse_kinematics(starts[best])
+        return inverse_kinematics(completed_joints(self.start_labels, self.lengths))
 
 
 def unexplained_share(views, joints):
@@ -234,7 +298,7 @@ def unexplained_share(views, joints):
     projected bone; the median over the views. 0 without outlines. Measured on the suite's tuning cases:
     0-4 % for fits that follow the person (also with arms overhead, where the head and neck keypoints are
     0.3-0.6 m off and cannot tell), 30-70 % for runs fitted 0.5-1.7 m off; a mirrored fit explains the
-    outline as well as the right one (0-9 %), so this cannot see that (limb_sides.foot_evidence does)."""
+    outline as well as the right one (0-9 %), so this cannot see that (hypotheses.py does)."""
     shares = []
     for view in views:
         if view.outline is None or not len(view.outline.points):
@@ -255,9 +319,20 @@ def view_from_features(camera, keypoints, contour, frontness=None, skin=None, ar
     distances = outline = None
     if contour is not None and len(contour.points):
         distances = boundary_distances(contour, (camera.width, camera.height), MAP_LABELS, arena=arena)
-        outline = outline_of(contour.points, arena=arena)
+        outline = outline_of(contour.points, (camera.width, camera.height), arena=arena)
+        if cut_off(contour.points, camera):   # the silhouette's shape no longer says where the knees and ankles are
+            keypoints = {name: value for name, value in keypoints.items() if name not in SILHOUETTE_KEYPOINTS}
+            if 'root' in keypoints:
+                x, y, confidence = keypoints['root']
+                keypoints['root'] = (x, y, confidence * CUT_ROOT_CONFIDENCE)
     skin = None if skin is None else np.asarray(skin, float).reshape(-1, 3)
     return View(camera, distances, keypoints, frontness, outline, skin)
+
+
+def cut_off(contour_points, camera):
+    """Whether the image's edge cuts the person of a contour (N, 2) [px] off (a contour pixel within EDGE_PX of it)."""
+    x, y = np.asarray(contour_points).T
+    return bool(np.any((x < EDGE_PX) | (x >= camera.width - EDGE_PX) | (y < EDGE_PX) | (y >= camera.height - EDGE_PX)))
 
 
 def frame_set_arena(contours):
@@ -278,5 +353,4 @@ def warm_up():
              for number, side in ((1, -1), (2, 1))]
     parameters = inverse_kinematics(forward_kinematics(np.r_[0.0, 0.0, 1.0, np.zeros(26)], lengths)[0])
     stages = StageSearch(FitterSettings(), lengths)
-    stages.new_frame()
     stages.search('torso', parameters, views, stages.outline_assignment('torso', parameters, views), pack_frame(views))

@@ -8,13 +8,14 @@ for paper 004's inverse kinematics. Every frame after that uses `triangulated_jo
 frame's own evidence beside the pose carried over from the last frame. A frame set too few views locate
 the torso in, before the first fit, gets a standing best guess (`guessed_parameters`) as its answer.
 """
+from dataclasses import replace
+
 import numpy as np
 
 from mvpose_nodes.body.kinematics import LENGTH_FRACTIONS, bone_lengths, forward_kinematics
 from mvpose_nodes.body.model import JOINT_INDEX, PARAMETER_INDEX, PARAMETER_NAMES
 from mvpose_nodes.body.triangulation import Rig, best_assignment, rms_of, triangulate_many, usable
 from mvpose_nodes.fitting.stage_search import KEYPOINT_JOINT, stage_indices
-from mvpose_nodes.vision.features import FRONT_SKIN_FRACTION
 
 PAIRED_LIMBS = ('knee', 'ankle', 'elbow', 'wrist')   # keypoints that come as a left/right pair
 TRIANGULATED = ('root', 'neck', 'head')   # keypoints of one joint each, which initialisation needs
@@ -88,28 +89,57 @@ def triangulated_joints(views, settings):
     return joints
 
 
-def facing_right(views, joints, face_evidence):
-    """The person's right (unit, horizontal) from where the face is seen: the cameras that see the
-    face are in front of the person (paper 000's views cannot tell left from right otherwise).
-    None when no view says (all side views)."""
-    pelvis = joints['pelvis']
-    forward = np.zeros(3)
+def consistent_views(views, found, gate):
+    """The views (fitter.View) without the keypoints that disagree with the others (issue 13: one camera's
+    elbow and wrist 200 px off would otherwise pull the fit): a keypoint farther than `gate` [m, at its
+    depth] from the projection of its joint triangulated from the views (`found`, triangulated_joints, which
+    leaves the one disagreeing view out of each point), or for a left/right pair from the nearer of the
+    pair's two joints (a view's labels may be the other way round), is left out of that view. Keypoints
+    without a triangulated joint are kept."""
+    kept = []
     for view in views:
-        if view.frontness is None:
-            continue
+        keypoints = {}
+        for name, value in view.keypoints.items():
+            joint = KEYPOINT_JOINT.get(name, name)
+            side, _, limb = joint.partition('_')
+            joints = [found[n] for n in ((f'left_{limb}', f'right_{limb}') if limb in PAIRED_LIMBS else (joint,))
+                      if n in found]
+            if joints:
+                pixels, depths = view.camera.project(np.array(joints))
+                metres = np.hypot(*(pixels - value[:2]).T) * depths / view.camera.K[0, 0]
+                if not np.any((depths > 0) & (metres <= gate)):
+                    continue
+            keypoints[name] = value
+        kept.append(replace(view, keypoints=keypoints))
+    return kept
+
+
+def facing_right(views, joints, face_evidence):
+    """The person's right (unit, horizontal) from where the face is seen: the cameras that see more skin
+    on the head than the others (Features.frontness) are in front of the person (paper 000's views cannot
+    tell left from right otherwise). Against the views' mean, not an absolute share: hair of a skin
+    colour reads as skin from every side (on the suite's tuning draw of seed 1, a dark-brown-haired
+    person's back showed 0.5–0.75 of the head as skin, the face 0.6). None when the views do not say
+    (all side views, or heads alike from every side)."""
+    pelvis = joints['pelvis']
+    seen = [view for view in views if view.frontness is not None]
+    if not seen:
+        return None
+    mean = np.mean([view.frontness for view in seen])
+    forward = np.zeros(3)
+    for view in seen:
         towards = view.camera.center - pelvis
         towards[2] = 0.0
-        forward += (view.frontness - FRONT_SKIN_FRACTION) * towards / np.linalg.norm(towards)
+        forward += (view.frontness - mean) * towards / np.linalg.norm(towards)
     if np.linalg.norm(forward) < face_evidence:
         return None
     return np.cross(forward / np.linalg.norm(forward), [0.0, 0.0, 1.0])
 
 
-def labelled_joints(views, settings):
-    """triangulated_joints with each pair's left and right from the face where a view sees it; or None."""
-    joints = triangulated_joints(views, settings)
-    if joints is None:
-        return None
+def labelled_joints(views, found, settings):
+    """Triangulated joints `found` ({joint: (3,)}, triangulated_joints) with each pair's left and right from
+    the face where a view sees it (a copy)."""
+    joints = dict(found)
     right = facing_right(views, joints, settings.face_evidence)
     if right is not None:  # which of each pair is the person's left: the face's side tells
         for limb in PAIRED_LIMBS:

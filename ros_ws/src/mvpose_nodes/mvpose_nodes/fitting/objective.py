@@ -245,6 +245,7 @@ TERMINAL_BONES = ('head', 'forearm', 'shin')
 OUTLINE_STEP = 3           # every this many contour pixels is an outline point
 OUTLINE_MARGIN_PX = 40     # the silhouette distance map reaches this far beyond the outline
 INSIDE_SAMPLES = 8         # points per bone checked to lie inside the silhouette
+EDGE_PX = 2                # contour pixels this near the image's edge are where the image cuts the person off
 
 
 @dataclass(frozen=True)
@@ -257,18 +258,30 @@ class Outline:
     origin: tuple
 
 
-def outline_of(contour_points, step=OUTLINE_STEP, margin=OUTLINE_MARGIN_PX, arena=None):
+def outline_of(contour_points, image_size=None, step=OUTLINE_STEP, margin=OUTLINE_MARGIN_PX, arena=None):
     """The Outline of an ordered closed contour (N, 2) [px] (x, y) (ContourLabels.points), its map in
     `arena` (a MapArena) if given; the silhouette is the contour's filled polygon (so the node, which
-    receives only the contour, sees the same)."""
+    receives only the contour, sees the same). With the image's (width, height) [px]: a person the image
+    cuts off is seen only inside it, so the contour along the image's edge (within EDGE_PX) is not the
+    person's outline and gives no outline points, and beyond the edge counts as inside the silhouette
+    (unseen: a bone there costs nothing)."""
     points = np.asarray(contour_points)
     x0, y0 = points.min(axis=0) - margin
     x1, y1 = points.max(axis=0) + margin
     inside = np.zeros((y1 - y0 + 1, x1 - x0 + 1), np.uint8)
     cv2.drawContours(inside, [(points - (x0, y0)).reshape(-1, 1, 2).astype(np.int32)], -1, 1, cv2.FILLED)
+    sampled = points[::step]
+    if image_size is not None:
+        width, height = image_size
+        inside[:max(-y0, 0)] = 1
+        inside[:, :max(-x0, 0)] = 1
+        inside[max(height - y0, 0):] = 1
+        inside[:, max(width - x0, 0):] = 1
+        sampled = sampled[(sampled[:, 0] >= EDGE_PX) & (sampled[:, 0] < width - EDGE_PX)
+                          & (sampled[:, 1] >= EDGE_PX) & (sampled[:, 1] < height - EDGE_PX)]
     outside = (arena or MapArena(inside.size)).take(inside.size).reshape(inside.shape)
     cv2.distanceTransform(1 - inside, cv2.DIST_L2, cv2.DIST_MASK_PRECISE, dst=outside)
-    return Outline(points[::step].astype(float), outside, (int(x0), int(y0)))
+    return Outline(sampled.astype(float), outside, (int(x0), int(y0)))
 
 
 def capsule_residuals(points, starts, ends, radii, terminal):

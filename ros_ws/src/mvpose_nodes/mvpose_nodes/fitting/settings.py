@@ -52,6 +52,9 @@ class FitterSettings:
     lost_frames: int = setting(2, 'after this many such fits in a row the fit is lost: said so '
                                   '(STATUS_LOST) and re-initialised on the next frame set', 1, 1000)
     ankle_height: float = setting(0.039, "the ankle's height, as a share of the stature (the template's)", 0.0, 0.2)
+    keypoint_gate: float = setting(
+        0.2, '[m] a keypoint farther than this (at its depth) from its joint triangulated from the views is left '
+             'out (initialisation.consistent_views)', 0.01, 10.0)
     outlier_rms: float = setting(
         12.0, '[px] a triangulation worse than this tries leaving one view out', 0.1, 1000.0)
     length_trust: float = setting(
@@ -66,24 +69,27 @@ class FitterSettings:
               'share of the height', 0.0, 1.0)
     stature_spread: float = setting(
         0.05, 'measurements of a stature more than this share below the tallest measured are left out', 0.0, 1.0)
-    facing_evidence: float = setting(
-        0.03, "[m] the feet's evidence (limb_sides.foot_evidence) that decides which way a start faces; "
-              'below it, the faces the views see decide', 0.0, 10.0)
     face_evidence: float = setting(
-        0.2, 'the summed (frontness − front skin fraction) towards the cameras needed to trust the face', 0.0, 10.0)
-    # Left and right (fitting/limb_sides.py).
-    facing_window: int = setting(8, "fits over which the feet's evidence about the facing is summed", 1, 1000)
-    facing_flip_evidence: float = setting(
-        0.4, "[m] the fit is turned round when the feet's evidence over facing_window fits is below minus this",
-        0.0, 100.0)
-    travel_yaw_limit_deg: float = setting(
-        45.0, '[deg] a walking torso turned further than this from its direction of travel is turned back',
-        0.0, 180.0)
-    walking_speed: float = setting(
-        0.4, "[m/s] faster than this, the pelvis's direction of travel is the person's forward", 0.0, 10.0)
-    walking_baseline: float = setting(0.4, '[s] over which the direction of travel is measured', 0.04, 10.0)
-    continuity_scale: float = setting(
-        0.5, '[m] turns a difference of squared distances [m²] into left/right evidence [m]', 0.01, 10.0)
+        0.2, "the sum over the views of (frontness − the views' mean) × the unit vector towards the camera "
+             'needed to trust the face (initialisation.facing_right)', 0.0, 10.0)
+    # Left and right, front and back (fitting/limb_sides.py, fitting/hypotheses.py).
+    walking_baseline: float = setting(
+        0.4, "[s] how long fits are remembered: the last two give each pair's predicted place and the pelvis's "
+             'velocity', 0.04, 10.0)
+    hypothesis_frames: int = setting(
+        5, 'frame sets over which other labellings of the body (turned round, legs or arms exchanged) are followed '
+           'beside the fit before the one that explains the views best is kept', 1, 1000)
+    crossing_distance: float = setting(
+        0.25, "[m] the fit's ankles nearer than this have passed each other (a stride, where continuity is least "
+              'sure which leg is which): once they part, the legs exchanged are followed beside the fit', 0.0, 2.0)
+    face_cost_share: float = setting(
+        0.2, "a labelling whose hips face away from the face the views see (initialisation.facing_right) has its "
+             "fit's cost raised by this share when labellings are compared (0: the face is not asked)", 0.0, 100.0)
+    probe_period: int = setting(
+        10, 'frame sets between probes: one other labelling at a time followed beside the fit', 1, 100000)
+    hypothesis_margin: float = setting(
+        0.02, "a probed labelling replaces the fit when its fits' cost over hypothesis_frames is this share lower",
+        0.0, 1.0)
 
 
 SETTING_FIELDS = tuple(fields(FitterSettings))

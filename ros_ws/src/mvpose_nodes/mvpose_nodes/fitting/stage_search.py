@@ -28,6 +28,7 @@ from mvpose_nodes.body.model import (JOINT_INDEX, LABEL_HEAD, LABEL_LEFT_LEG, LA
                                      PARAMETER_INDEX)
 from mvpose_nodes.fitting.compiled import (LABEL_SLOT, StagePack, bone_length_array, fractions_arrays, nearest_capsules,
                                            search)
+from mvpose_nodes.fitting.limb_limits import LATERAL_STIFFNESS
 from mvpose_nodes.fitting.objective import (CAPSULE_RADII, TERMINAL_BONES, inside_cost, limb_cost,
                                             outline_cost)
 
@@ -35,6 +36,31 @@ JOINT_LIMITS = {'left_shin_rx': (-2.6, 0.05), 'right_shin_rx': (-2.6, 0.05),    
                 'left_forearm_rx': (-0.05, 2.6), 'right_forearm_rx': (-0.05, 2.6),  # elbows forwards [rad];
                 # the clavicles move little, and no keypoint sees the shoulders: keep them near the rest
                 **{f'{side}_clavicle_{axis}': (-0.5, 0.5) for side in ('left', 'right') for axis in ('ry', 'rz')}}
+# The twist of the limbs whose child is a hinge, about their own axis (limb_limits.limb_twist): (bone, hinge,
+# reference direction and the hinge axis there, in the parent's frame (x right, y forward, z up), the twist's
+# range [rad], and the range [rad] of the limb's lateral angle, the arcsine of its direction's x).
+# Without it a thigh turned half round bends its knee forwards and the body facing backwards explains the
+# silhouettes as well as the right one; anatomically the hip turns about ±45° (measured on the suite's
+# tuning motions with the knee bent over 25°: within ±30°, a cartwheel 61°). The arms' reference is the
+# T-pose, where the swing is defined for every direction the arm can take (an arm overhead included); the
+# humerus turns about ±90° (tuning motions: -34° to 93° for the right arm). A thigh crosses the body's middle
+# little (adduction): on the tuning motions at most 14° (a cartwheel 23°), where the knees and ankles of the
+# other leg, the legs exchanged, put it at 10-35° (median 20-26°); so a leg's lateral angle towards the other
+# side is limited to ADDUCTION (abduction: free). Nor does an upper arm reach far across the body: on the
+# tuning motions at most -2° towards the other side (a cartwheel 32°), the elbows and wrists exchanged 45° or
+# more (median 55-65°); so ACROSS (the shoulder's horizontal adduction reaches about 45°).
+ADDUCTION = np.radians(15.0)
+ACROSS = np.radians(35.0)
+TWIST_LIMITS = {
+    'left_leg': ('left_thigh', 'left_shin_rx', (0.0, 0.0, -1.0), (1.0, 0.0, 0.0), np.radians((-45.0, 45.0)),
+                 (-np.pi / 2, ADDUCTION)),
+    'right_leg': ('right_thigh', 'right_shin_rx', (0.0, 0.0, -1.0), (1.0, 0.0, 0.0), np.radians((-45.0, 45.0)),
+                  (-ADDUCTION, np.pi / 2)),
+    'left_arm': ('left_upper_arm', 'left_forearm_rx', (-1.0, 0.0, 0.0), (0.0, 0.0, -1.0), np.radians((-110.0, 60.0)),
+                 (-np.pi / 2, ACROSS)),
+    'right_arm': ('right_upper_arm', 'right_forearm_rx', (1.0, 0.0, 0.0), (0.0, 0.0, 1.0), np.radians((-60.0, 110.0)),
+                  (-ACROSS, np.pi / 2)),
+}
 KEYPOINT_JOINT = {'root': 'pelvis'}   # 2D keypoint name -> the joint it locates
 
 STAGE_PARAMETERS = {
@@ -88,6 +114,48 @@ def stage_indices(stage):
     return [PARAMETER_INDEX[name] for name in STAGE_PARAMETERS[stage]]
 
 
+def twist_arrays(stage):
+    """The StagePack's twist fields of `stage` (TWIST_LIMITS; empty for the torso and the head): bones (T,),
+    reference and neutral (T, 3), twist low and high (T,) [rad], hinge parameter indices (T,), lateral low
+    and high (T,) [rad]."""
+    limits = [TWIST_LIMITS[stage]] if stage in TWIST_LIMITS else []
+    return (np.array([BONE_INDEX[bone] for bone, *_ in limits], np.int64),
+            np.array([reference for _, _, reference, *_ in limits], float).reshape(-1, 3),
+            np.array([neutral for _, _, _, neutral, *_ in limits], float).reshape(-1, 3),
+            np.array([span[0] for *_, span, _ in limits], float), np.array([span[1] for *_, span, _ in limits], float),
+            np.array([PARAMETER_INDEX[hinge] for _, hinge, *_ in limits], np.int64),
+            np.array([lateral[0] for *_, lateral in limits], float),
+            np.array([lateral[1] for *_, lateral in limits], float))
+
+
+def twist_excess(stage, frames, parameters):
+    """[rad²] The squared excess of the stage's limb's twist beyond its TWIST_LIMITS, times the sine of its
+    child hinge's angle (at most 90°), squared, plus LATERAL_STIFFNESS × the squared excess of its lateral
+    angle: bone frames {bone: 3×3} (kinematics.forward_kinematics) and parameters (29,). The twist: the
+    signed angle about the limb's direction d, in its parent's frame, from the hinge axis it would have if
+    swung to d from the reference direction by the shortest rotation (Rodrigues), its hinge axis there
+    being the neutral one, to the hinge axis (the limb frame's x) it has; the lateral angle: arcsin(d_x).
+    The reference of limb_limits.limb_excess."""
+    bone, hinge, reference, neutral, (low, high), (lateral_low, lateral_high) = TWIST_LIMITS[stage]
+    parent = BONES[BONE_INDEX[bone]].parent
+    local = frames[parent].T @ frames[bone] if parent else frames[bone]
+    direction, axis = local @ np.array([0.0, 0.0, -1.0]), local[:, 0]
+    reference, neutral = np.array(reference), np.array(neutral)
+    lateral = np.arcsin(np.clip(direction[0], -1.0, 1.0))
+    aside = LATERAL_STIFFNESS * (max(lateral_low - lateral, 0.0) + max(lateral - lateral_high, 0.0)) ** 2
+    cosine = float(np.dot(reference, direction))
+    if 1.0 + cosine < 1e-6:
+        return float(aside)
+    rotation_axis = np.cross(reference, direction)
+    angle = np.arctan2(np.linalg.norm(rotation_axis), cosine)
+    unit = rotation_axis / max(np.linalg.norm(rotation_axis), 1e-300)
+    swung = (neutral * np.cos(angle) + np.cross(unit, neutral) * np.sin(angle)
+             + unit * np.dot(unit, neutral) * (1 - np.cos(angle)))
+    twist = np.arctan2(np.dot(np.cross(swung, axis), direction), np.dot(swung, axis))
+    beyond = max(low - twist, 0.0) + max(twist - high, 0.0)
+    return float((beyond * np.sin(min(abs(parameters[PARAMETER_INDEX[hinge]]), np.pi / 2))) ** 2 + aside)
+
+
 def projected_capsules(view, pixels, depth, bones=slice(None)):
     """The projected capsules of `bones` (indices into BONES; default all) in one view: starts, ends
     (B, 2) [px], radii (B,) [px] (CAPSULE_RADIUS at the bone's mean depth), from the projected joints
@@ -107,16 +175,12 @@ def has_evidence(stage, views, assigned):
 
 class StageSearch:
     """The stages' objectives and searches for one person (bone lengths [m] by name) under `settings`
-    (FitterSettings). `new_frame()` before each frame: the keypoint targets are kept per frame."""
+    (FitterSettings)."""
 
     def __init__(self, settings, lengths):
         self.settings = settings
         self.lengths = lengths
         self.bone_lengths = bone_length_array(lengths)
-        self._targets = {}
-
-    def new_frame(self):
-        self._targets = {}
 
     def search(self, stage, parameters, views, assigned, frame):
         """One Nelder–Mead stage over STAGE_PARAMETERS[stage]; (new parameters, StageResult). assigned:
@@ -177,6 +241,7 @@ class StageSearch:
             np.array([j for _, joints, _, _ in targets for j in joints], np.int64),
             np.concatenate([xy for _, _, xy, _ in targets]) if targets else np.zeros((0, 2)),
             np.concatenate([c for _, _, _, c in targets]) if targets else np.zeros(0),
+            *twist_arrays(stage),
             np.array([settings.enclosure_weight, settings.outline_weight, settings.inside_weight, settings.outline_scale,
                       settings.outline_gate, settings.boundary_weight, settings.keypoint_weight, settings.keypoint_scale,
                       settings.smoothness_weight if priors else 0.0, settings.limit_weight if priors else 0.0]))
@@ -199,12 +264,23 @@ class StageSearch:
             assigned.append(view.outline.points[keep])
         return assigned
 
+    def limit_cost(self, stage, parameters):
+        """The stage's joint limits at `parameters` (29,): limit_weight × the squared excess [rad²] of its
+        parameters beyond JOINT_LIMITS and of its limb's twist beyond TWIST_LIMITS (twist_excess), as the
+        search's prior adds them (the reference of compiled.stage_objective's limit term)."""
+        excess = 0.0
+        for name, index in zip(STAGE_PARAMETERS[stage], stage_indices(stage)):
+            low, high = JOINT_LIMITS.get(name, (-np.inf, np.inf))
+            excess += (max(low - parameters[index], 0.0) + max(parameters[index] - high, 0.0)) ** 2
+        if stage in TWIST_LIMITS:
+            excess += twist_excess(stage, forward_kinematics(parameters, self.lengths)[1], parameters)
+        return self.settings.limit_weight * excess
+
     def stage_cost(self, stage, parameters, views, assigned=None):
         """The stage's objective (module docstring) and the indices of the views that contributed;
         assigned: per view the outline points the stage explains (None: no outline term)."""
         settings = self.settings
-        joints, _ = forward_kinematics(parameters, self.lengths)
-        projections = [view.camera.project(joints) for view in views]  # every joint, once per camera
+        projections = [view.camera.project(forward_kinematics(parameters, self.lengths)[0]) for view in views]  # once per camera
         total, used = 0.0, set()
         mine = STAGE_CAPSULE_INDEX[stage]
         points, capsules = [], []   # the outline points of all views at once: one vectorised evaluation
@@ -237,17 +313,15 @@ class StageSearch:
             used.add(index)
         return total, used
 
-    def keypoint_targets(self, stage, views):
+    @staticmethod
+    def keypoint_targets(stage, views):
         """[(view index, joint indices (K,), keypoints (K, 2) [px], confidences (K,))] of the stage's
-        keypoints in each view that has some; worked out once per stage and frame (`views` is the
-        frame's list), since the search evaluates the cost hundreds of times."""
-        key = (stage, id(views))
-        if key not in self._targets:
-            self._targets[key] = []
-            for index, view in enumerate(views):
-                names = [n for n in STAGE_KEYPOINTS[stage] if n in view.keypoints]
-                if names:
-                    values = np.array([view.keypoints[n] for n in names], dtype=float)
-                    self._targets[key].append((index, [JOINT_INDEX[KEYPOINT_JOINT.get(n, n)] for n in names],
-                                               values[:, :2], values[:, 2]))
-        return self._targets[key]
+        keypoints in each view that has some."""
+        targets = []
+        for index, view in enumerate(views):
+            names = [n for n in STAGE_KEYPOINTS[stage] if n in view.keypoints]
+            if names:
+                values = np.array([view.keypoints[n] for n in names], dtype=float)
+                targets.append((index, [JOINT_INDEX[KEYPOINT_JOINT.get(n, n)] for n in names], values[:, :2],
+                                values[:, 2]))
+        return targets
