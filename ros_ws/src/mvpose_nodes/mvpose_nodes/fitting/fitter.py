@@ -94,7 +94,6 @@ class SkeletonFitter:
         self.starting = False  # the comparison is a start's (its fits are INITIALISING)
         self.since_probe = 0  # frame sets since the last probe ended
         self.probes = 0       # probes so far (which labelling is next: PROBES in turn)
-        self.switches = 0     # times a rival was taken (for diagnostics)
         self.lost_fits = 0    # consecutive fits that left much of the outline unexplained (unexplained_share)
         self.start_labels = None  # the start's triangulated joints, labelled (initial_parameters)
         self.face_right = None    # this frame set's person's right as the face says (initialisation.facing_right)
@@ -158,7 +157,7 @@ class SkeletonFitter:
             raise ValueError('too few views with keypoints to initialise (need root, neck and head in 2 views)')
         self.track = Track(start, LimbTracks(self.settings))
         self.follow(self.track, stamp, views, found)
-        self.rivals = [self.spawn(labelling, pairs, stamp, views, found) for labelling, pairs in START_LABELLINGS]
+        self.rivals = [self.spawn(pairs, stamp, views, found) for _, pairs in START_LABELLINGS]
         self.window, self.starting, self.lost_fits = self.settings.hypothesis_frames, True, 0
 
     def probe(self, stamp, views, found, labelling=None):
@@ -168,19 +167,19 @@ class SkeletonFitter:
             labelling = PROBES[self.probes % len(PROBES)]
             self.probes += 1
         self.track.cost = self.track.last_cost
-        self.rivals = [self.spawn(labelling, RELABELLINGS[labelling], stamp, views, found)]
+        self.rivals = [self.spawn(RELABELLINGS[labelling], stamp, views, found)]
         self.window, self.since_probe = self.settings.hypothesis_frames, 0
 
-    def spawn(self, labelling, pairs, stamp, views, found):
+    def spawn(self, pairs, stamp, views, found):
         """A rival Track: this frame's fit with `pairs` exchanged, fitted from there (the frame's triangulated
         pairs exchanged alike), its cost so far that fit's."""
-        rival = self.track.relabelled(labelling, pairs)
+        rival = self.track.relabelled(pairs)
         rival.limbs.history = rival.limbs.history[:-1]   # this frame's fit, to be replaced by the rival's own
         start = inverse_kinematics(exchanged_pairs(self.track.joints, pairs))
         rival.parameters, rival.results = self.search_stages(start, views, relabelled_joints(found, pairs))
         rival.joints, _ = forward_kinematics(rival.parameters, self.lengths)
         rival.limbs.append(stamp, rival.joints)
-        rival.cost = rival.last_cost = self.cost_of(rival.parameters, views)
+        rival.cost = rival.last_cost = self.cost_of(rival.parameters, rival.joints, views)
         return rival
 
     def compare(self):
@@ -190,8 +189,6 @@ class SkeletonFitter:
         margin = 0.0 if self.starting else self.settings.hypothesis_margin
         if best.cost < (1 - margin) * self.track.cost:
             self.track = best
-            self.switches += 1
-        self.track.labelling = ''
         self.rivals, self.starting, self.since_probe = [], False, 0
 
     def follow(self, track, stamp, views, found):
@@ -212,15 +209,14 @@ class SkeletonFitter:
         track.parameters, track.results = self.search_stages(parameters, views, labelled)
         track.joints, _ = forward_kinematics(track.parameters, self.lengths)
         track.limbs.append(stamp, track.joints)
-        track.last_cost = self.cost_of(track.parameters, views)
+        track.last_cost = self.cost_of(track.parameters, track.joints, views)
         track.cost += track.last_cost
 
-    def cost_of(self, parameters, views):
-        """How well the pose `parameters` (29,) explains the views: the six stages' objectives (without the
+    def cost_of(self, parameters, joints, views):
+        """How well the pose `parameters` (29,), joints (15, 3) [m], explains the views: the six stages' objectives (without the
         smoothness prior, with the joint limits) with each view's left/right labels oriented to the pose
         and the outline assigned from it; raised by face_cost_share when the pose's hips face away from the
         face the views see (face_right)."""
-        joints, _ = forward_kinematics(parameters, self.lengths)
         oriented = [oriented_view(view, joints) for view in views]
         frame = pack_frame(oriented)
         cost = sum(self.stages.compiled_cost(stage, parameters, oriented,

@@ -52,22 +52,20 @@ START_LABELLINGS = tuple(
 @dataclass
 class Track:
     """One hypothesis being followed: its parameters (29,) and its recent fits (limbs: LimbTracks, which
-    label the frame's triangulated pairs by continuity), what it is (`labelling`: '' for the fit itself,
-    else how it was made from the fit), its fits' cost summed over the comparison window and its last fit's
-    cost, and its last fit's joints (15, 3) [m] and stage_search.StageResults."""
+    label the frame's triangulated pairs by continuity), its fits' cost summed over the comparison window
+    and its last fit's cost, and its last fit's joints (15, 3) [m] and stage_search.StageResults."""
     parameters: np.ndarray
     limbs: LimbTracks
-    labelling: str = ''
     cost: float = 0.0
     last_cost: float = 0.0
     joints: np.ndarray = None
     results: list = field(default_factory=list)
 
-    def relabelled(self, labelling, pairs):
+    def relabelled(self, pairs):
         """A new Track with `pairs` exchanged in its remembered fits (its parameters are set by its first fit)."""
         limbs = LimbTracks(self.limbs.settings)
         limbs.history = [(stamp, exchanged_pairs(joints, pairs)) for stamp, joints in self.limbs.history]
-        return Track(self.parameters.copy(), limbs, labelling)
+        return Track(self.parameters.copy(), limbs)
 
 
 def relabelled_joints(found, pairs):
