@@ -105,8 +105,10 @@ def test_skeleton_fitter_node_in_the_graph(synth_bag, background, ros_context):
     for skeleton in skeletons:
         assert skeleton['joint_names'] == list(JOINT_NAMES) and len(skeleton['parameters']) == 29
         assert [stage['name'] for stage in skeleton['stages']][0] == 'torso'
-    # INITIALISING while the start's labellings are compared (hypothesis_frames: 5, the whole bag)
-    assert [s['status'] for s in skeletons[:5]] == [1] * 5
+    # INITIALISING from the start while its labellings are compared (at most hypothesis_frames: 5, the whole
+    # bag; fewer once all but one are pruned), then not again
+    initialising = [s['status'] == 1 for s in skeletons[:5]]
+    assert initialising[0] and initialising == sorted(initialising, reverse=True), initialising
     for first, again in zip(skeletons[:5], skeletons[5:]):
         assert again['parameters'] == first['parameters'] and again['joints'] == first['joints']
         assert again['status'] == first['status']

@@ -81,6 +81,13 @@ ORIENTING_BONES = {
 }
 
 
+# ORIENTING_BONES as arrays: the joints that have one, their bones' start and end joints and rest directions.
+_ORIENTED = [JOINT_INDEX[name] for name in JOINT_NAMES if ORIENTING_BONES[name] is not None]
+_ORIENTING_START = [JOINT_INDEX[ORIENTING_BONES[name][0]] for name in JOINT_NAMES if ORIENTING_BONES[name] is not None]
+_ORIENTING_END = [JOINT_INDEX[ORIENTING_BONES[name][1]] for name in JOINT_NAMES if ORIENTING_BONES[name] is not None]
+_ORIENTING_REST = np.array([ORIENTING_BONES[name][2] for name in JOINT_NAMES if ORIENTING_BONES[name] is not None], float)
+
+
 def torso_frame(joints):
     """3×3 rotation (columns x forward, y left, z up) of the torso from joints (15, 3) [m]:
     z along pelvis→neck, y along right_hip→left_hip made orthogonal to z."""
@@ -95,18 +102,14 @@ def joint_orientations(joints):
 
     Each joint's frame is the torso frame turned by the smallest rotation that takes its orienting
     bone from the rest direction to the posed one (paper 004's exact axis-angle → quaternion, Eq. 3–4),
-    so a person standing in the rest pose has every joint frame equal to the torso frame."""
+    so a person standing in the rest pose has every joint frame equal to the torso frame. The bones'
+    rotations are found all at once (rotation_between of (N, 3))."""
     torso = torso_frame(joints)
-    orientations = []
-    for name in JOINT_NAMES:
-        bone = ORIENTING_BONES[name]
-        if bone is None:
-            orientations.append(quaternion_from_matrix(torso))
-            continue
-        start, end, rest = bone
-        local = torso.T @ (joints[JOINT_INDEX[end]] - joints[JOINT_INDEX[start]])
-        orientations.append(quaternion_from_matrix(torso @ matrix_from_quaternion(rotation_between(rest, local))))
-    return np.array(orientations)
+    local = (joints[_ORIENTING_END] - joints[_ORIENTING_START]) @ torso   # each bone in the torso frame
+    frames = torso @ matrix_from_quaternion(rotation_between(_ORIENTING_REST, local))
+    orientations = np.tile(quaternion_from_matrix(torso), (len(JOINT_NAMES), 1))
+    orientations[_ORIENTED] = [quaternion_from_matrix(frame) for frame in frames]
+    return orientations
 
 # The 14 bones of paper 000 (Fig. 6, Table 1), as (parent joint, child joint).
 BONES = (

@@ -62,20 +62,34 @@ def twist_excess(parameters, bone, reference, neutral, low, high, hinge, lateral
 @njit(cache=True, nogil=True, error_model='numpy')
 def forward_joints(parameters, bone_lengths):
     """Joints (15, 3) [m] of 29 parameters (Table 1 order) and bone lengths (14,) [m]: the joints of
-    kinematics.forward_kinematics (without its bone frames)."""
+    kinematics.forward_kinematics (without its bone frames). The 3×3 products written out: numba's `@`
+    calls BLAS, whose overhead per call is larger than such a product."""
     joints = np.zeros((len(CHAIN_END) + 1, 3))
     joints[PELVIS] = parameters[TORSO_POSITION]
     frames = np.empty((len(CHAIN_END), 3, 3))
     for bone in range(len(CHAIN_END)):
-        frame = np.eye(3) if CHAIN_PARENT[bone] < 0 else frames[CHAIN_PARENT[bone]].copy()
+        parent = CHAIN_PARENT[bone]
         if CHAIN_HAS_ANGLES[bone]:
             angles = np.zeros(3)
             for axis in range(3):
                 if CHAIN_ANGLES[bone, axis] >= 0:
                     angles[axis] = parameters[CHAIN_ANGLES[bone, axis]]
-            frame = frame @ euler_rotation(angles[0], angles[1], angles[2])
-        frames[bone] = frame
-        joints[CHAIN_END[bone]] = joints[CHAIN_START[bone]] + bone_lengths[bone] * (frame @ CHAIN_REST[bone])
+            rotation = euler_rotation(angles[0], angles[1], angles[2])
+            if parent < 0:
+                frames[bone] = rotation
+            else:
+                for i in range(3):
+                    for j in range(3):
+                        frames[bone, i, j] = (frames[parent, i, 0] * rotation[0, j] + frames[parent, i, 1] * rotation[1, j]
+                                              + frames[parent, i, 2] * rotation[2, j])
+        elif parent < 0:
+            frames[bone] = np.eye(3)
+        else:
+            frames[bone] = frames[parent]
+        start, end, length = CHAIN_START[bone], CHAIN_END[bone], bone_lengths[bone]
+        for i in range(3):
+            joints[end, i] = joints[start, i] + length * (frames[bone, i, 0] * CHAIN_REST[bone, 0] + frames[bone, i, 1]
+                                                          * CHAIN_REST[bone, 1] + frames[bone, i, 2] * CHAIN_REST[bone, 2])
     return joints
 
 
@@ -213,9 +227,12 @@ def _project(frame, view, joints):
     pixels, depth = np.empty((count, 2)), np.empty(count)
     distorted = D[0] != 0 or D[1] != 0 or D[2] != 0 or D[3] != 0 or D[4] != 0
     for j in range(count):
-        c = joints[j] @ R.T + t
-        depth[j] = c[2]
-        x, y = c[0] / c[2], c[1] / c[2]
+        X, Y, Z = joints[j, 0], joints[j, 1], joints[j, 2]
+        cx = R[0, 0] * X + R[0, 1] * Y + R[0, 2] * Z + t[0]
+        cy = R[1, 0] * X + R[1, 1] * Y + R[1, 2] * Z + t[1]
+        cz = R[2, 0] * X + R[2, 1] * Y + R[2, 2] * Z + t[2]
+        depth[j] = cz
+        x, y = cx / cz, cy / cz
         if distorted:
             r2 = x * x + y * y
             radial = 1 + r2 * (D[0] + r2 * (D[1] + r2 * D[4]))

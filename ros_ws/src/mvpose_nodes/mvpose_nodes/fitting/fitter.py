@@ -17,8 +17,8 @@ exchanged. With the hips' and shoulders' turn, the thighs' adduction and the upp
 body limited as anatomy limits them (stage_search.TWIST_LIMITS), a bent knee or elbow no longer fits the
 wrong way, nor do limbs crossed, so
 the objective tells them apart (and the face the views see, where the pose cannot): after a start,
-every other labelling is followed beside the fit for hypothesis_frames frame sets, and the one whose
-fits explain the views best is kept; after that, one other labelling at a time is followed so, every
+every other labelling is followed beside the fit for hypothesis_frames frame sets (those clearly worse
+dropped on the way: hypothesis_prune), and the one whose fits explain the views best is kept; after that, one other labelling at a time is followed so, every
 probe_period frame sets, and taken when it explains the views clearly better. Every tuning constant is
 a field of settings.FitterSettings.
 """
@@ -125,6 +125,8 @@ class SkeletonFitter:
         else:
             for track in [self.track] + self.rivals:
                 self.follow(track, stamp, views, found)
+                if self.rivals:   # a comparison under way
+                    track.cost += self.cost_of(track.parameters, track.joints, views)
             ankles = self.track.joints[[JOINT_INDEX['left_ankle'], JOINT_INDEX['right_ankle']]]
             apart = np.linalg.norm(ankles[0] - ankles[1]) >= settings.crossing_distance
             self.legs_passed |= not apart
@@ -141,7 +143,8 @@ class SkeletonFitter:
         starting = self.starting
         if self.rivals:
             self.window -= 1
-            if self.window <= 0:
+            self.prune()
+            if self.window <= 0 or not self.rivals:
                 self.compare()
         unexplained = unexplained_share(views, track.joints)
         self.lost_fits = self.lost_fits + 1 if unexplained > settings.lost_share else 0
@@ -157,6 +160,7 @@ class SkeletonFitter:
             raise ValueError('too few views with keypoints to initialise (need root, neck and head in 2 views)')
         self.track = Track(start, LimbTracks(self.settings))
         self.follow(self.track, stamp, views, found)
+        self.track.cost = self.cost_of(self.track.parameters, self.track.joints, views)
         self.rivals = [self.spawn(pairs, stamp, views, found) for _, pairs in START_LABELLINGS]
         self.window, self.starting, self.lost_fits = self.settings.hypothesis_frames, True, 0
 
@@ -166,7 +170,7 @@ class SkeletonFitter:
         if labelling is None:
             labelling = PROBES[self.probes % len(PROBES)]
             self.probes += 1
-        self.track.cost = self.track.last_cost
+        self.track.cost = self.cost_of(self.track.parameters, self.track.joints, views)
         self.rivals = [self.spawn(RELABELLINGS[labelling], stamp, views, found)]
         self.window, self.since_probe = self.settings.hypothesis_frames, 0
 
@@ -179,22 +183,31 @@ class SkeletonFitter:
         rival.parameters, rival.results = self.search_stages(start, views, relabelled_joints(found, pairs))
         rival.joints, _ = forward_kinematics(rival.parameters, self.lengths)
         rival.limbs.append(stamp, rival.joints)
-        rival.cost = rival.last_cost = self.cost_of(rival.parameters, rival.joints, views)
+        rival.cost = self.cost_of(rival.parameters, rival.joints, views)
         return rival
 
+    def prune(self):
+        """Drop the hypotheses whose fits so far cost over hypothesis_prune more than the cheapest's: the
+        rivals, and the fit itself, whose place the cheapest rival then takes."""
+        bound = (1 + self.settings.hypothesis_prune) * min(track.cost for track in [self.track] + self.rivals)
+        self.rivals = [rival for rival in self.rivals if rival.cost <= bound]
+        if self.track.cost > bound:
+            self.track = min(self.rivals, key=lambda rival: rival.cost)
+            self.rivals.remove(self.track)
+
     def compare(self):
-        """End of a window: the rival that cost the least over it replaces the fit if it cost
-        hypothesis_margin less (at a start, any less: nothing is known yet)."""
-        best = min(self.rivals, key=lambda rival: rival.cost)
-        margin = 0.0 if self.starting else self.settings.hypothesis_margin
-        if best.cost < (1 - margin) * self.track.cost:
-            self.track = best
+        """End of a window (or of its rivals, pruned): the rival that cost the least over it replaces the
+        fit if it cost hypothesis_margin less (at a start, any less: nothing is known yet)."""
+        if self.rivals:
+            best = min(self.rivals, key=lambda rival: rival.cost)
+            margin = 0.0 if self.starting else self.settings.hypothesis_margin
+            if best.cost < (1 - margin) * self.track.cost:
+                self.track = best
         self.rivals, self.starting, self.since_probe = [], False, 0
 
     def follow(self, track, stamp, views, found):
         """Fit `track` to this frame set: from its last pose moved on at the pelvis's velocity (the
-        smoothness prior centred there too), the frame's triangulated pairs labelled by its continuity;
-        its cost for the frame added to its window's."""
+        smoothness prior centred there too), the frame's triangulated pairs labelled by its continuity."""
         parameters = track.parameters.copy()
         predicted = track.limbs.predicted(stamp)
         if predicted is not None and track.limbs.history:
@@ -209,8 +222,6 @@ class SkeletonFitter:
         track.parameters, track.results = self.search_stages(parameters, views, labelled)
         track.joints, _ = forward_kinematics(track.parameters, self.lengths)
         track.limbs.append(stamp, track.joints)
-        track.last_cost = self.cost_of(track.parameters, track.joints, views)
-        track.cost += track.last_cost
 
     def cost_of(self, parameters, joints, views):
         """How well the pose `parameters` (29,), joints (15, 3) [m], explains the views: the six stages' objectives (without the
@@ -219,8 +230,9 @@ class SkeletonFitter:
         face the views see (face_right)."""
         oriented = [oriented_view(view, joints) for view in views]
         frame = pack_frame(oriented)
+        nearest = self.stages.outline_nearest(parameters, oriented)
         cost = sum(self.stages.compiled_cost(stage, parameters, oriented,
-                                             self.stages.outline_assignment(stage, parameters, oriented), frame)[0]
+                                             self.stages.outline_assignment(stage, parameters, oriented, nearest), frame)[0]
                    + self.stages.limit_cost(stage, parameters) for stage in STAGE_NAMES)
         hips = joints[JOINT_INDEX['right_hip']] - joints[JOINT_INDEX['left_hip']]
         if self.face_right is not None and np.dot(hips, self.face_right) < 0:

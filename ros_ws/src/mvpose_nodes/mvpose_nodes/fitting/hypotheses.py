@@ -13,7 +13,8 @@ So the fitter follows hypotheses (Track): at a start, the fit and each other lab
 and their combinations) are each tracked for hypothesis_frames frame sets and the one whose fits cost the
 least over them is kept; later, every probe_period frame sets one other labelling at a time (PROBES, in
 turn) is tracked beside the fit for as long, and taken if its fits cost hypothesis_margin less, and the
-legs exchanged after each stride (the fit's ankles nearer than crossing_distance, then apart). A track's
+legs exchanged after each stride (the fit's ankles nearer than crossing_distance, then apart). After every
+frame set, tracks whose fits cost hypothesis_prune more than the cheapest's are dropped. A track's
 cost is its fits' objective with the outline assigned from the fitted pose (SkeletonFitter.cost_of), not
 the searches' own costs, whose assignments were made from where each search started. Pure NumPy.
 """
@@ -49,15 +50,14 @@ START_LABELLINGS = tuple(
     for count in range(1, len(RELABELLINGS) + 1) for names in itertools.combinations(RELABELLINGS, count))
 
 
-@dataclass
+@dataclass(eq=False)   # a hypothesis is itself, not its values: list.remove finds this one
 class Track:
     """One hypothesis being followed: its parameters (29,) and its recent fits (limbs: LimbTracks, which
     label the frame's triangulated pairs by continuity), its fits' cost summed over the comparison window
-    and its last fit's cost, and its last fit's joints (15, 3) [m] and stage_search.StageResults."""
+    (counted only while one is under way), and its last fit's joints (15, 3) [m] and stage_search.StageResults."""
     parameters: np.ndarray
     limbs: LimbTracks
     cost: float = 0.0
-    last_cost: float = 0.0
     joints: np.ndarray = None
     results: list = field(default_factory=list)
 

@@ -79,6 +79,9 @@ class FitterSettings:
     hypothesis_frames: int = setting(
         5, 'frame sets over which other labellings of the body (turned round, legs or arms exchanged) are followed '
            'beside the fit before the one that explains the views best is kept', 1, 1000)
+    hypothesis_prune: float = setting(
+        0.1, "a hypothesis whose fits so far cost this share more than the cheapest's is dropped before its window "
+             'ends (a large value: every hypothesis followed to the end)', 0.0, 1e6)
     crossing_distance: float = setting(
         0.25, "[m] the fit's ankles nearer than this have passed each other (a stride, where continuity is least "
               'sure which leg is which): once they part, the legs exchanged are followed beside the fit', 0.0, 2.0)

@@ -98,6 +98,7 @@ CAPSULE_TERMINAL = np.array([bone.name.endswith(TERMINAL_BONES) for bone in BONE
 FRACTIONS, SAMPLES = fractions_arrays()
 WITHOUT_PRIORS = np.array([1.0] * 8 + [0.0, 0.0])   # StagePack.weights' factors: smoothness and limits off
 STAGE_CAPSULE_INDEX = {stage: np.array([BONE_INDEX[name] for name in names]) for stage, names in STAGE_CAPSULES.items()}
+STAGE_CAPSULE_MASK = {stage: np.isin(np.arange(len(BONES)), index) for stage, index in STAGE_CAPSULE_INDEX.items()}
 
 
 @dataclass
@@ -246,23 +247,31 @@ class StageSearch:
                       settings.outline_gate, settings.boundary_weight, settings.keypoint_weight, settings.keypoint_scale,
                       settings.smoothness_weight if priors else 0.0, settings.limit_weight if priors else 0.0]))
 
-    def outline_assignment(self, stage, parameters, views):
+    def outline_assignment(self, stage, parameters, views, nearest=None):
         """Per view, the outline points (M, 2) [px] that the stage's capsules explain in the pose
         `parameters`: those nearer to one of them than to any other capsule, within outline_gate (None for
         a view without an outline). Fixed for the stage's search, so that the torso is not pulled to
-        explain the limbs, which are still where they were in the last frame."""
+        explain the limbs, which are still where they were in the last frame. nearest: outline_nearest of
+        the same pose and views, when the caller assigns several stages from it."""
+        nearest = self.outline_nearest(parameters, views) if nearest is None else nearest
+        mine = STAGE_CAPSULE_MASK[stage]
+        return [None if view.outline is None else view.outline.points[mine[capsule] & within]
+                for view, (capsule, within) in zip(views, nearest)]
+
+    def outline_nearest(self, parameters, views):
+        """Per view, for each outline point, the index (into BONES) of the capsule nearest to it in the pose
+        `parameters` (29,) and whether it lies within outline_gate of it: (N,) int, (N,) bool ((None, None)
+        for a view without an outline)."""
         joints, _ = forward_kinematics(parameters, self.lengths)
-        mine = STAGE_CAPSULE_INDEX[stage]
-        assigned = []
+        nearest = []
         for view in views:
             if view.outline is None:
-                assigned.append(None)
+                nearest.append((None, None))
                 continue
-            nearest, residuals = nearest_capsules(view.outline.points, *projected_capsules(view, *view.camera.project(joints)),
+            capsule, residuals = nearest_capsules(view.outline.points, *projected_capsules(view, *view.camera.project(joints)),
                                                   CAPSULE_TERMINAL)
-            keep = np.isin(nearest, mine) & (np.abs(residuals) < self.settings.outline_gate)
-            assigned.append(view.outline.points[keep])
-        return assigned
+            nearest.append((capsule, np.abs(residuals) < self.settings.outline_gate))
+        return nearest
 
     def limit_cost(self, stage, parameters):
         """The stage's joint limits at `parameters` (29,): limit_weight × the squared excess [rad²] of its
