@@ -10,7 +10,8 @@ import pytest
 from mvpose_nodes.body.camera import studio_rig
 from mvpose_nodes.body.kinematics import bone_lengths, forward_kinematics, inverse_kinematics
 from mvpose_nodes.body.model import STAGE_NAMES
-from mvpose_nodes.fitting.compiled import bone_length_array, forward_joints, pack_frame
+from mvpose_nodes.fitting.compiled import pack_frame
+from mvpose_nodes.fitting.compiled_kinematics import bone_length_array, forward_joints
 from mvpose_nodes.fitting.fitter import frame_set_arena, view_from_features
 from mvpose_nodes.fitting.settings import FitterSettings
 from mvpose_nodes.fitting.stage_search import STAGE_PARAMETERS, StageSearch, stage_indices

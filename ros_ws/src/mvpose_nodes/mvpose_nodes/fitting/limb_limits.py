@@ -1,6 +1,6 @@
 """The limbs' anatomical limits beyond single joint angles, compiled (numba): a limb's twist about its own
 axis and its lateral angle, which the stages' objective limits (stage_search.TWIST_LIMITS, whose numpy
-reference is stage_search.twist_excess), and the Euler rotation they and compiled.forward_joints share.
+reference is stage_search.twist_excess), and the Euler rotation they and compiled_kinematics.forward_joints share.
 """
 import numpy as np
 from numba import njit

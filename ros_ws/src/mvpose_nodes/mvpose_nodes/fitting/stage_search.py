@@ -26,8 +26,8 @@ import numpy as np
 from mvpose_nodes.body.kinematics import BONE_INDEX, BONES, forward_kinematics
 from mvpose_nodes.body.model import (JOINT_INDEX, LABEL_HEAD, LABEL_LEFT_LEG, LABEL_RIGHT_LEG, LABEL_TORSO,
                                      PARAMETER_INDEX)
-from mvpose_nodes.fitting.compiled import (LABEL_SLOT, StagePack, bone_length_array, fractions_arrays, nearest_capsules,
-                                           search)
+from mvpose_nodes.fitting.compiled import LABEL_SLOT, StagePack, fractions_arrays, nearest_capsules, search
+from mvpose_nodes.fitting.compiled_kinematics import bone_length_array
 from mvpose_nodes.fitting.limb_limits import LATERAL_STIFFNESS
 from mvpose_nodes.fitting.objective import (CAPSULE_RADII, TERMINAL_BONES, inside_cost, limb_cost,
                                             outline_cost)
