@@ -9,6 +9,7 @@ centroids of the silhouette restricted to rectangles around each foot and knee.
 
 Images are RGB uint8 (H, W, 3); masks bool (H, W); points (x, y) in pixels, x right, y down.
 """
+import bisect
 from dataclasses import dataclass
 
 import cv2
@@ -198,7 +199,7 @@ def head_column(mask, root, bottom=None):
     x, row = int(root[0] // HEAD_SCAN_SCALE), min(int(root[1] // HEAD_SCAN_SCALE), coarse.shape[0] - 1)
     left, right = x, x + 1
     middle = x + 0.5   # of the trunk: the last run not much wider than the runs so far (not an arm held out)
-    runs, widths = [], []   # (row, first column, last column + 1) on the coarse grid, from the centroid up
+    runs, widths = [], []   # (row, first column, last column + 1) on the coarse grid, from the centroid up; widths sorted
     for row in range(row, -1, -1):
         line = np.concatenate([[False], coarse[row], [False]])
         edges = np.flatnonzero(line[1:] != line[:-1])
@@ -212,8 +213,10 @@ def head_column(mask, root, bottom=None):
         chosen = candidates[np.argmin(np.abs(0.5 * (starts[candidates] + ends[candidates]) - middle))]
         left, right = starts[chosen], ends[chosen]
         runs.append((row, left, right))
-        widths.append(right - left)
-        if right - left <= TRUNK_WIDENING * np.median(widths):   # a cell a row at most: a lean of 45° (an arm
+        bisect.insort(widths, right - left)
+        count = len(widths)   # their median, as np.median gives it (without its overhead in this loop)
+        median = widths[count // 2] if count % 2 else 0.5 * (widths[count // 2 - 1] + widths[count // 2])
+        if right - left <= TRUNK_WIDENING * median:   # a cell a row at most: a lean of 45° (an arm
             middle += np.clip(0.5 * (left + right) - middle, -1.0, 1.0)   # touching the head jumps further)
     if not runs:
         rows, columns = np.nonzero(mask)
