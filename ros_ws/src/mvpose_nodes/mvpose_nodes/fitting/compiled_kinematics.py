@@ -59,7 +59,8 @@ def forward_joints(parameters, bone_lengths):
             else:
                 for i in range(3):
                     for j in range(3):
-                        frames[bone, i, j] = (frames[parent, i, 0] * rotation[0, j] + frames[parent, i, 1] * rotation[1, j]
+                        frames[bone, i, j] = (frames[parent, i, 0] * rotation[0, j]
+                                              + frames[parent, i, 1] * rotation[1, j]
                                               + frames[parent, i, 2] * rotation[2, j])
         elif parent < 0:
             frames[bone] = np.eye(3)
@@ -67,6 +68,7 @@ def forward_joints(parameters, bone_lengths):
             frames[bone] = frames[parent]
         start, end, length = CHAIN_START[bone], CHAIN_END[bone], bone_lengths[bone]
         for i in range(3):
-            joints[end, i] = joints[start, i] + length * (frames[bone, i, 0] * CHAIN_REST[bone, 0] + frames[bone, i, 1]
-                                                          * CHAIN_REST[bone, 1] + frames[bone, i, 2] * CHAIN_REST[bone, 2])
+            joints[end, i] = joints[start, i] + length * (frames[bone, i, 0] * CHAIN_REST[bone, 0]
+                                                          + frames[bone, i, 1] * CHAIN_REST[bone, 1]
+                                                          + frames[bone, i, 2] * CHAIN_REST[bone, 2])
     return joints

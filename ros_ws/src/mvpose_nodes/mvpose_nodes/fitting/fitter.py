@@ -15,11 +15,11 @@ Left and right, front and back (beyond the paper; hypotheses.py): the same silho
 the same points labelled the other way round, every pair exchanged (turned round), or one pair of limbs
 exchanged. With the hips' and shoulders' turn, the thighs' adduction and the upper arms' reach across the
 body limited as anatomy limits them (stage_search.TWIST_LIMITS), a bent knee or elbow no longer fits the
-wrong way, nor do limbs crossed, so
-the objective tells them apart (and the face the views see, where the pose cannot): after a start,
-every other labelling is followed beside the fit for hypothesis_frames frame sets (those clearly worse
-dropped on the way: hypothesis_prune), and the one whose fits explain the views best is kept; after that, one other labelling at a time is followed so, every
-probe_period frame sets, and taken when it explains the views clearly better. Every tuning constant is
+wrong way, nor do limbs crossed, so the objective tells them apart (and the face the views see, where the
+pose cannot): after a start, every other labelling is followed beside the fit for hypothesis_frames frame
+sets (those clearly worse dropped on the way: hypothesis_prune), and the one whose fits explain the views
+best is kept; after that, one other labelling at a time is followed so, every probe_period frame sets,
+and taken when it explains the views clearly better. Every tuning constant is
 a field of settings.FitterSettings.
 """
 import time
@@ -232,7 +232,8 @@ class SkeletonFitter:
         frame = pack_frame(oriented)
         nearest = self.stages.outline_nearest(parameters, oriented)
         cost = sum(self.stages.compiled_cost(stage, parameters, oriented,
-                                             self.stages.outline_assignment(stage, parameters, oriented, nearest), frame)[0]
+                                             self.stages.outline_assignment(stage, parameters, oriented, nearest),
+                                             frame)[0]
                    + self.stages.limit_cost(stage, parameters) for stage in STAGE_NAMES)
         hips = joints[JOINT_INDEX['right_hip']] - joints[JOINT_INDEX['left_hip']]
         if self.face_right is not None and np.dot(hips, self.face_right) < 0:
