@@ -18,15 +18,14 @@ def euler_rotation(rx, ry, rz):
 
 
 @njit(cache=True, nogil=True, error_model='numpy')
-def limb_twist(rx, ry, rz, reference, neutral):
-    """[rad] The twist of a limb about its own axis whose rotation in its parent bone's frame is
-    Rz(rz)·Ry(ry)·Rx(rx) (its rest direction along the parent's −Z, its child's hinge axis its own X):
+def limb_twist(rotation, reference, neutral):
+    """[rad] The twist of a limb about its own axis whose rotation in its parent bone's frame is `rotation`
+    (3×3; its rest direction along the parent's −Z, its child's hinge axis its own X):
     the signed angle about the limb's direction d from the hinge axis the limb would have if swung to d
     from the `reference` direction (3,) (unit, in the parent's frame) by the shortest rotation, its hinge
     axis there being `neutral` (3,) (unit, ⟂ reference), to the hinge axis it has (swing–twist
     decomposition). 0 when d points opposite the reference (the swing is undefined there)."""
-    rotation = euler_rotation(rx, ry, rz)
-    d = rotation @ np.array([0.0, 0.0, -1.0])
+    d = -rotation[:, 2]
     hinge = rotation[:, 0]
     c = reference[0] * d[0] + reference[1] * d[1] + reference[2] * d[2]
     if 1.0 + c < 1e-6:
@@ -52,8 +51,9 @@ def limb_excess(rx, ry, rz, hinge_angle, reference, neutral, low, high, lateral_
     `hinge_angle` [rad] (at most 90°), squared (a straight knee or elbow shows no twist, a bent one shows
     it as far as it is bent); plus how far its lateral angle (the arcsine of its direction's x in its
     parent's frame) lies beyond [lateral_low, lateral_high] [rad], squared, times LATERAL_STIFFNESS."""
-    twist = limb_twist(rx, ry, rz, reference, neutral)
+    rotation = euler_rotation(rx, ry, rz)
+    twist = limb_twist(rotation, reference, neutral)
     beyond = max(low - twist, 0.0) + max(twist - high, 0.0)
-    lateral = np.arcsin(min(max(-euler_rotation(rx, ry, rz)[0, 2], -1.0), 1.0))
+    lateral = np.arcsin(min(max(-rotation[0, 2], -1.0), 1.0))
     aside = max(lateral_low - lateral, 0.0) + max(lateral - lateral_high, 0.0)
     return (beyond * np.sin(min(abs(hinge_angle), np.pi / 2))) ** 2 + LATERAL_STIFFNESS * aside * aside
