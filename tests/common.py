@@ -53,7 +53,8 @@ def stacks_of_hung(process):
     except subprocess.TimeoutExpired:
         process.kill()
         stdout, stderr = process.communicate()
-    return f'its output and the stacks of its threads:\n{stdout}\n{stderr}'
+    last_lines = '\n'.join(stdout.splitlines()[-20:])  # a chatty tool's output would hide the stacks
+    return f'the last lines of its output and the stacks of its threads:\n{last_lines}\n{stderr}'
 
 
 class Background:

@@ -1,6 +1,7 @@
 """rclpy helpers shared by the nodes and tools: the Jazzy run pattern, QoS conversions, graph look-ups."""
 import os
 import re
+import select
 import signal
 import sys
 import threading
@@ -103,26 +104,45 @@ def abandon_stop(name):
 
 class StopSignal:
     """Catch SIGINT/SIGTERM ourselves (rclpy's handler would shut the context down at once),
-    so that a tool can drain what the middleware still holds before it exits."""
+    so that a tool can drain what the middleware still holds before it exits.
+
+    The handler only sets a flag and writes a byte to a pipe, which wait() selects on: a handler that took a
+    lock (threading.Event.set) could interrupt the main thread inside that same Event's wait(), while it holds
+    the lock, and wait for it for ever (a `topic pub` hung so on Ctrl-C, 1 in a few hundred)."""
 
     def __init__(self):
-        self.event = threading.Event()
+        self._stopped = False
+        self._read_end = self._write_end = None
 
     def __enter__(self):
         rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
+        self._read_end, self._write_end = os.pipe()
+        os.set_blocking(self._write_end, False)
         self._previous = {sig: signal.signal(sig, self._handle) for sig in (signal.SIGINT, signal.SIGTERM)}
         return self
 
     def _handle(self, signum, frame):
-        self.event.set()
+        self._stopped = True
+        try:
+            os.write(self._write_end, b'!')
+        except BlockingIOError:  # the pipe is full of earlier signals' bytes: wait() wakes anyway
+            pass
 
     @property
     def stopped(self):
-        return self.event.is_set()
+        return self._stopped
+
+    def wait(self, seconds):
+        """Sleep `seconds`, or less if a stop signal comes (or came); whether one did."""
+        if not self._stopped:
+            select.select([self._read_end], [], [], max(seconds, 0.0))
+        return self._stopped
 
     def __exit__(self, *exc):
         for sig, handler in self._previous.items():
             signal.signal(sig, handler)
+        os.close(self._read_end)
+        os.close(self._write_end)
         rclpy.try_shutdown()
 
 

@@ -186,7 +186,7 @@ def play(args):
             wait_for_subscribers(node, played_publishers, args.wait_for_subscribers, stop)
             # The nodes of a graph started with the player come up one after another: the later ones too.
             wait_for_discovery(node, played_publishers, args.settle, stop)
-        stop.event.wait(args.delay)
+        stop.wait(args.delay)
         begin_ns = bag.start_ns + int(args.start_offset * 1e9)
         audience = Audience(publishers, {topic for topic, publisher in publishers.items()
                                          if publisher.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL})
@@ -261,7 +261,7 @@ def wait_for_discovery(node, publishers, settle, stop):
     started = changed = time.monotonic()
     seen = snapshot()
     while not stop.stopped and time.monotonic() - changed < settle and time.monotonic() - started < DISCOVERY_LIMIT:
-        stop.event.wait(0.02)
+        stop.wait(0.02)
         now = snapshot()
         if now != seen:
             seen, changed = now, time.monotonic()
@@ -273,7 +273,7 @@ def wait_for_subscribers(node, publishers, timeout, stop):
     deadline = time.monotonic() + timeout
     unmatched = list(publishers)
     while unmatched and time.monotonic() < deadline and not stop.stopped:
-        stop.event.wait(0.05)
+        stop.wait(0.05)
         unmatched = [topic for topic, publisher in publishers.items()
                      if publisher.get_subscription_count() < max(1, node.count_subscribers(topic))]
     if unmatched:
@@ -301,7 +301,7 @@ def play_once(bag, topics, begin_ns, audience, clock, args, stop):
                 next_clock += clock_period
             if now >= due:
                 break
-            stop.event.wait((min(due, next_clock) if clock else due) - now)
+            stop.wait((min(due, next_clock) if clock else due) - now)
         if stop.stopped:
             break
         audience.publish(topic_info.name, data)

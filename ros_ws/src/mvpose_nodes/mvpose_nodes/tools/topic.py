@@ -161,7 +161,8 @@ def list_topics(args):
 
 def rate_statistics(stamps, window):
     """(rate [Hz], min, max, std dev [s] of the intervals, intervals) over the last `window` intervals."""
-    intervals = [b - a for a, b in zip(stamps[-window - 1:], stamps[-window:])]
+    last = stamps[-window - 1:]
+    intervals = [b - a for a, b in zip(last, last[1:])]
     if not intervals:
         return None
     mean = sum(intervals) / len(intervals)
@@ -259,7 +260,7 @@ def pub(args):
             count += 1
             print(f'publishing #{count}: {args.type}', flush=True)
             if times is None or count < times:
-                stop.event.wait(1.0 / args.rate)
+                stop.wait(1.0 / args.rate)
         wait_for_acknowledgements([publisher], timeout_sec=2.0)
         node.destroy_node()
     return 0
