@@ -9,7 +9,11 @@ method, bone lengths from the template scaled to the estimated height, the legs'
 Then six Nelder–Mead searches (Sec. 5.1, stage_search.py): torso, head and neck, left arm, right arm,
 left leg, right leg, each over its own parameters with the rest fixed, each minimising its own objective.
 Paper 000 Sec. 5.3 avoids local minima by good starts: each limb stage is searched from the previous
-frame's pose and from the frame's own triangulated joints, and the better result kept.
+frame's pose and from the frame's own triangulated joints, and the better result kept. A (re)start also
+searches each limb from canonical poses (limb_starts.py: raised, out, forward, hanging; a stride, seated),
+each with the outline assigned from its own start and the results compared by how much of the outline
+they leave unexplained (StageSearch.explained_cost), so that misread or missing hand keypoints do not
+leave a raised arm folded down.
 
 Left and right, front and back (beyond the paper; hypotheses.py): the same silhouettes fit a person and
 the same points labelled the other way round, every pair exchanged (turned round), or one pair of limbs
@@ -35,6 +39,7 @@ from mvpose_nodes.fitting.hypotheses import PROBES, RELABELLINGS, START_LABELLIN
 from mvpose_nodes.fitting.initialisation import (completed_joints, consistent_views, facing_right, labelled_joints,
                                                  person_lengths, stature, triangulated_joints, upright)
 from mvpose_nodes.fitting.limb_sides import LimbTracks, exchanged_pairs, oriented_view
+from mvpose_nodes.fitting.limb_starts import limb_start_joints
 from mvpose_nodes.fitting.objective import EDGE_PX, MapArena, boundary_distances, map_floats, outline_of
 from mvpose_nodes.fitting.settings import FitterSettings
 from mvpose_nodes.fitting.stage_search import CAPSULE_ENDS, StageSearch, stage_indices
@@ -159,7 +164,7 @@ class SkeletonFitter:
         if start is None:
             raise ValueError('too few views with keypoints to initialise (need root, neck and head in 2 views)')
         self.track = Track(start, LimbTracks(self.settings))
-        self.follow(self.track, stamp, views, found)
+        self.follow(self.track, stamp, views, found, canonical=True)
         self.track.cost = self.cost_of(self.track.parameters, self.track.joints, views)
         self.rivals = [self.spawn(pairs, stamp, views, found) for _, pairs in START_LABELLINGS]
         self.window, self.starting, self.lost_fits = self.settings.hypothesis_frames, True, 0
@@ -205,9 +210,10 @@ class SkeletonFitter:
                 self.track = best
         self.rivals, self.starting, self.since_probe = [], False, 0
 
-    def follow(self, track, stamp, views, found):
+    def follow(self, track, stamp, views, found, canonical=False):
         """Fit `track` to this frame set: from its last pose moved on at the pelvis's velocity (the
-        smoothness prior centred there too), the frame's triangulated pairs labelled by its continuity."""
+        smoothness prior centred there too), the frame's triangulated pairs labelled by its continuity;
+        `canonical`: the limbs also searched from the canonical poses (a start)."""
         parameters = track.parameters.copy()
         predicted = track.limbs.predicted(stamp)
         if predicted is not None and track.limbs.history:
@@ -219,7 +225,7 @@ class SkeletonFitter:
             track.limbs.label(stamp, labelled)
         elif found is not None:   # a start: the pairs as initial_parameters labelled them
             labelled = self.start_labels
-        track.parameters, track.results = self.search_stages(parameters, views, labelled)
+        track.parameters, track.results = self.search_stages(parameters, views, labelled, canonical)
         track.joints, _ = forward_kinematics(track.parameters, self.lengths)
         track.limbs.append(stamp, track.joints)
 
@@ -240,36 +246,60 @@ class SkeletonFitter:
             cost *= 1 + self.settings.face_cost_share
         return cost
 
-    def search_stages(self, parameters, views, found):
-        """The six stages of paper 000 Sec. 5.1 from `parameters` (29,); each limb stage searched also from the
-        frame's triangulated joints `found` ({joint: (3,)} or None), and the better of the two kept (Sec.
+    def search_stages(self, parameters, views, found, canonical=False):
+        """The six stages of paper 000 Sec. 5.1 from `parameters` (29,); each stage after the torso's searched
+        also from the frame's triangulated joints `found` ({joint: (3,)} or None) and, with `canonical` (a
+        start), each limb stage from the canonical limb poses (limb_starts.py), the best result kept (Sec.
         5.3). Returns the fitted parameters and the stage_search.StageResults."""
         reference, _ = forward_kinematics(parameters, self.lengths)
         if found is not None:
             for name, position in found.items():
                 reference[JOINT_INDEX[name]] = position
-        candidate = None
+        alternatives = None
         oriented = [oriented_view(view, reference) for view in views]
         frame = pack_frame(oriented)
         results = []
         for stage in STAGE_NAMES:
             assigned = self.stages.outline_assignment(stage, parameters, oriented)
             searched, result = self.stages.search(stage, parameters, oriented, assigned, frame)
-            if found is not None and stage != 'torso':
-                if candidate is None:   # the limbs' triangulated joints, as angles relative to the fitted torso
-                    hybrid, _ = forward_kinematics(parameters, self.lengths)
-                    for name, position in found.items():
-                        if name not in ('pelvis', 'neck'):
-                            hybrid[JOINT_INDEX[name]] = position
-                    candidate = inverse_kinematics(hybrid)
-                alternative = parameters.copy()
-                alternative[stage_indices(stage)] = candidate[stage_indices(stage)]
-                other, other_result = self.stages.search(stage, alternative, oriented, assigned, frame)
-                if other_result.cost < result.cost:
-                    searched, result = other, other_result
+            if stage != 'torso' and (found is not None or canonical):
+                if alternatives is None:   # starts relative to the fitted torso
+                    alternatives = self.alternative_starts(parameters, found, canonical)
+                outcomes = [(searched, result)]
+                for start in alternatives[stage]:
+                    alternative = parameters.copy()
+                    alternative[stage_indices(stage)] = start[stage_indices(stage)]
+                    # From a canonical start the outline is assigned from that pose: a raised arm's outline
+                    # is nobody's in a pose with the arm down, and nothing would pull the arm up to it.
+                    own = self.stages.outline_assignment(stage, alternative, oriented) if canonical else assigned
+                    outcomes.append(self.stages.search(stage, alternative, oriented, own, frame))
+                searched, result = min(outcomes, key=(lambda outcome: self.stages.explained_cost(
+                    stage, outcome[0], oriented, frame)) if canonical else (lambda outcome: outcome[1].cost))
             parameters = searched
             results.append(result)
         return parameters, results
+
+    def alternative_starts(self, parameters, found, canonical):
+        """{stage: [parameters (29,), ...]} to search each stage after the torso's from, besides `parameters`:
+        the limbs' triangulated joints `found` as angles relative to the fitted torso, and with `canonical`
+        the canonical limb poses (limb_starts.limb_start_joints) for the limb stages."""
+        fitted, _ = forward_kinematics(parameters, self.lengths)
+        starts = {stage: [] for stage in STAGE_NAMES[1:]}
+        if found is not None:
+            hybrid = fitted.copy()
+            for name, position in found.items():
+                if name not in ('pelvis', 'neck'):
+                    hybrid[JOINT_INDEX[name]] = position
+            candidate = inverse_kinematics(hybrid)
+            for stage in starts:
+                starts[stage].append(candidate)
+        if canonical:
+            arms, legs = limb_start_joints(fitted)
+            for posed, stages in ((arms, ('left_arm', 'right_arm')), (legs, ('left_leg', 'right_leg'))):
+                for candidate in map(inverse_kinematics, posed):
+                    for stage in stages:
+                        starts[stage].append(candidate)
+        return starts
 
     def measure(self, joints):
         """Measure the person on triangulated joints {name: (3,) [m]} if they stand upright

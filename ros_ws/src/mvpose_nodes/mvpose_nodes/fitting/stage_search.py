@@ -29,7 +29,7 @@ from mvpose_nodes.body.model import (JOINT_INDEX, LABEL_HEAD, LABEL_LEFT_LEG, LA
 from mvpose_nodes.fitting.compiled import LABEL_SLOT, StagePack, fractions_arrays, nearest_capsules, search
 from mvpose_nodes.fitting.compiled_kinematics import bone_length_array
 from mvpose_nodes.fitting.limb_limits import LATERAL_STIFFNESS
-from mvpose_nodes.fitting.objective import (CAPSULE_RADII, TERMINAL_BONES, inside_cost, limb_cost,
+from mvpose_nodes.fitting.objective import (CAPSULE_RADII, OUTLINE_STEP, TERMINAL_BONES, inside_cost, limb_cost,
                                             outline_cost)
 
 JOINT_LIMITS = {'left_shin_rx': (-2.6, 0.05), 'right_shin_rx': (-2.6, 0.05),     # knees bend backwards,
@@ -272,6 +272,21 @@ class StageSearch:
                                                   CAPSULE_TERMINAL)
             nearest.append((capsule, np.abs(residuals) < self.settings.outline_gate))
         return nearest
+
+    def explained_cost(self, stage, parameters, views, frame):
+        """A limb stage's searches from different starts, each with its own outline assignment, compared on one
+        footing: the stage's cost at `parameters` (29,) with the outline assigned from that pose, its joint
+        limits, and every outline point of the views that no capsule explains (beyond outline_gate of all)
+        at the Cauchy cost of a residual of outline_gate, as outline_cost caps it. So a folded arm that
+        leaves a raised arm's outline unexplained costs more than the raised arm explaining it; within one
+        assignment (the stage's own objective) such points are left out and cost nothing."""
+        settings = self.settings
+        nearest = self.outline_nearest(parameters, views)
+        unexplained = sum(int(np.count_nonzero(~within)) for _, within in nearest if within is not None)
+        cost, _ = self.compiled_cost(stage, parameters, views, self.outline_assignment(stage, parameters, views, nearest),
+                                     frame)
+        capped = OUTLINE_STEP * settings.outline_scale ** 2 * np.log1p((settings.outline_gate / settings.outline_scale) ** 2)
+        return cost + self.limit_cost(stage, parameters) + settings.outline_weight * capped * unexplained
 
     def limit_cost(self, stage, parameters):
         """The stage's joint limits at `parameters` (29,): limit_weight × the squared excess [rad²] of its
