@@ -7,7 +7,8 @@ hand's skin found on the trousers, a raised hand not found at all) leaves an arm
 silhouettes show it raised, and the tracking that follows keeps it there. Started from the true pose
 instead, the 10 tuning cases of seed 1 went from 105 to 66 mm. A limb's Nelder-Mead search from a few
 poses that span where limbs go (raised, out, forward, hanging; a stride, a raised knee, seated) finds the
-raised arm, the better of the searches being kept as for the other starts.
+raised arm; the searches of a limb are compared by the outline they leave unexplained
+(stage_search.StageSearch.explained_cost).
 
 Each pose gives the upper and lower bone's directions as (up, out, forward) weights in the torso's frame:
 up from the pelvis to the neck, out towards the limb's own side, forward the way the torso faces.
@@ -55,8 +56,9 @@ def posed_limbs(joints, poses, chain):
         base, middle, end = (JOINT_INDEX[f'{side}_{name}'] for name in chain)
         upper = np.linalg.norm(joints[middle] - joints[base])
         lower = np.linalg.norm(joints[end] - joints[middle])
+        axes = np.array([up, outward, forward])
         for k, (upper_weights, lower_weights) in enumerate(poses):
-            directions = [np.asarray(w, float) @ np.array([up, outward, forward]) for w in (upper_weights, lower_weights)]
+            directions = [np.asarray(weights, float) @ axes for weights in (upper_weights, lower_weights)]
             upper_direction, lower_direction = (d / np.linalg.norm(d) for d in directions)
             posed[k, middle] = joints[base] + upper * upper_direction
             posed[k, end] = posed[k, middle] + lower * lower_direction

@@ -283,9 +283,10 @@ class StageSearch:
         settings = self.settings
         nearest = self.outline_nearest(parameters, views)
         unexplained = sum(int(np.count_nonzero(~within)) for _, within in nearest if within is not None)
-        cost, _ = self.compiled_cost(stage, parameters, views, self.outline_assignment(stage, parameters, views, nearest),
-                                     frame)
-        capped = OUTLINE_STEP * settings.outline_scale ** 2 * np.log1p((settings.outline_gate / settings.outline_scale) ** 2)
+        assigned = self.outline_assignment(stage, parameters, views, nearest)
+        cost, _ = self.compiled_cost(stage, parameters, views, assigned, frame)
+        scale = settings.outline_scale
+        capped = OUTLINE_STEP * scale ** 2 * np.log1p((settings.outline_gate / scale) ** 2)
         return cost + self.limit_cost(stage, parameters) + settings.outline_weight * capped * unexplained
 
     def limit_cost(self, stage, parameters):
