@@ -82,10 +82,11 @@ ORIENTING_BONES = {
 
 
 # ORIENTING_BONES as arrays: the joints that have one, their bones' start and end joints and rest directions.
-_ORIENTED = [JOINT_INDEX[name] for name in JOINT_NAMES if ORIENTING_BONES[name] is not None]
-_ORIENTING_START = [JOINT_INDEX[ORIENTING_BONES[name][0]] for name in JOINT_NAMES if ORIENTING_BONES[name] is not None]
-_ORIENTING_END = [JOINT_INDEX[ORIENTING_BONES[name][1]] for name in JOINT_NAMES if ORIENTING_BONES[name] is not None]
-_ORIENTING_REST = np.array([ORIENTING_BONES[name][2] for name in JOINT_NAMES if ORIENTING_BONES[name] is not None], float)
+_ORIENTING = [(name, ORIENTING_BONES[name]) for name in JOINT_NAMES if ORIENTING_BONES[name] is not None]
+_ORIENTED = [JOINT_INDEX[name] for name, _ in _ORIENTING]
+_ORIENTING_START = [JOINT_INDEX[start] for _, (start, _, _) in _ORIENTING]
+_ORIENTING_END = [JOINT_INDEX[end] for _, (_, end, _) in _ORIENTING]
+_ORIENTING_REST = np.array([rest for _, (_, _, rest) in _ORIENTING], float)
 
 
 def torso_frame(joints):

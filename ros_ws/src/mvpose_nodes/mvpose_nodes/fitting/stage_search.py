@@ -283,11 +283,15 @@ class StageSearch:
         settings = self.settings
         nearest = self.outline_nearest(parameters, views)
         unexplained = sum(int(np.count_nonzero(~within)) for _, within in nearest if within is not None)
-        assigned = self.outline_assignment(stage, parameters, views, nearest)
-        cost, _ = self.compiled_cost(stage, parameters, views, assigned, frame)
         scale = settings.outline_scale
-        capped = OUTLINE_STEP * scale ** 2 * np.log1p((settings.outline_gate / scale) ** 2)
-        return cost + self.limit_cost(stage, parameters) + settings.outline_weight * capped * unexplained
+        capped = settings.outline_weight * OUTLINE_STEP * scale ** 2 * np.log1p((settings.outline_gate / scale) ** 2)
+        return self.posed_cost(stage, parameters, views, frame, nearest) + capped * unexplained
+
+    def posed_cost(self, stage, parameters, views, frame, nearest):
+        """The stage's objective at the pose `parameters` (29,) with the outline assigned from that pose
+        (`nearest`: its outline_nearest), without the smoothness prior, plus its joint limits."""
+        assigned = self.outline_assignment(stage, parameters, views, nearest)
+        return self.compiled_cost(stage, parameters, views, assigned, frame)[0] + self.limit_cost(stage, parameters)
 
     def limit_cost(self, stage, parameters):
         """The stage's joint limits at `parameters` (29,): limit_weight × the squared excess [rad²] of its
