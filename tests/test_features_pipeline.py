@@ -16,19 +16,26 @@ from mvpose_nodes.vision.skin import SkinModel
 pytestmark = pytest.mark.cli
 
 
+def render_studio_frame(walk, heading_deg=45, camera_number=3, looks=None):
+    """(rgb, labels, camera, pose, empty): the middle frame of `walk` placed with the heading, seen in one
+    960×540 studio camera, with its ground truth and the same view without the person."""
+    from mvpose_nodes.studio import scene
+    looks = looks or scene.Appearance()
+    motion = walk.placed(heading=math.radians(heading_deg))
+    i = len(motion.joints) // 2
+    pose = scene.BodyPose(motion.joints[i], motion.toes[i], motion.hand_tips[i], motion.head_forward[i])
+    camera = studio_rig((960, 540), cameras=[camera_number])[0]
+    view = scene.prepare_camera(camera)
+    rendering = scene.render(view, pose, looks, *scene.floor_shadow(pose, looks))
+    rgb, labels = scene.Realism().finish(rendering, view, camera_number, 0, 0)
+    empty, _ = scene.Realism().finish(scene.Rendering(view.background, np.zeros_like(labels)), view, camera_number, 0, 0)
+    return rgb, labels, camera, pose, empty
+
+
 @pytest.fixture(scope='module')
 def studio_frame(cmu_walk):
     """One 960×540 view of the synthetic studio with its ground truth, rendered here."""
-    from mvpose_nodes.studio import scene
-    motion = cmu_walk.placed(heading=math.radians(45))
-    i = len(motion.joints) // 2
-    pose = scene.BodyPose(motion.joints[i], motion.toes[i], motion.hand_tips[i], motion.head_forward[i])
-    camera = studio_rig((960, 540), cameras=[3])[0]
-    view = scene.prepare_camera(camera)
-    rendering = scene.render(view, pose, scene.Appearance(), *scene.floor_shadow(pose, scene.Appearance()))
-    rgb, labels = scene.Realism().finish(rendering, view, 3, 0, 0)
-    empty, _ = scene.Realism().finish(scene.Rendering(view.background, np.zeros_like(labels)), view, 3, 0, 0)
-    return rgb, labels, camera, pose, empty
+    return render_studio_frame(cmu_walk)
 
 
 def extractor(settings=FeatureSettings(), background=None):
@@ -64,6 +71,27 @@ def test_pipeline_with_a_learned_background(studio_frame):
     # Without the blue screen the edges are less clean (the person is only 15 000 px at this size), and
     # the floor shadow must be told from the person by its colour: a lower bar than the chroma key's.
     check_against_truth(features, labels, camera, pose, min_iou=0.9)
+
+
+def test_patches_of_trousers_of_skin_colour_are_not_taken_for_hands(cmu_walk, monkeypatch):
+    # Brown trousers cross the shipped model's skin threshold in patches of a hand's size; a patch has the
+    # colour of the cloth around it, a hand not (skin.surround_contrast). Camera 5 sees both hands.
+    from mvpose_nodes.studio import palette, scene
+    from mvpose_nodes.vision import features as pipeline
+    looks = scene.Appearance(trousers=palette.TROUSER_COLOURS['brown'], shirt=palette.SHIRTS['grey'], long_sleeves=True)
+    rgb, _, camera, pose, _ = render_studio_frame(cmu_walk, heading_deg=200, camera_number=5, looks=looks)
+    pixels, _ = camera.project(pose.joints)
+    wrists = pixels[[JOINT_NAMES.index('left_wrist'), JOINT_NAMES.index('right_wrist')]]
+
+    def wrist_errors():
+        keypoints = extractor()(rgb).keypoints
+        return [np.linalg.norm(wrists - (keypoints[name].x, keypoints[name].y), axis=1).min()
+                for name in ('left_wrist', 'right_wrist') if keypoints[name].visible]
+
+    errors = wrist_errors()
+    assert len(errors) == 2 and max(errors) < 12, errors
+    monkeypatch.setattr(pipeline, 'HAND_MIN_CONTRAST', 0.0)   # every hand-sized skin region may be a hand
+    assert max(wrist_errors()) > 40, 'the largest hand-sized skin region is not a patch of the trousers'
 
 
 def test_no_person_gives_empty_features(studio_frame):

@@ -6,10 +6,13 @@ SkinModel.likelihood of a random 1920×1080 image: median 5.5 ms over 30 runs pi
 """
 import io
 
+import cv2
+
 import numpy as np
 import pytest
 
-from mvpose_nodes.vision.skin import BINS, SkinModel, SkinModelError, detect_skin, mask_counts, scores_of_counts, skin_regions
+from mvpose_nodes.vision.skin import (BINS, SkinModel, SkinModelError, detect_skin, mask_counts, scores_of_counts,
+                                     skin_regions, surround_contrast)
 
 pytestmark = pytest.mark.pure
 
@@ -227,6 +230,30 @@ def test_bad_model_file_is_a_one_line_user_error_naming_it(tmp_path, make_file):
     with pytest.raises(SkinModelError, match='broken_model.npz') as raised:
         SkinModel.load(path)
     assert '\n' not in str(raised.value)
+
+
+def test_surround_contrast_tells_a_hand_from_a_patch_of_cloth_of_its_colour():
+    # A tan sleeve with a skin-coloured patch in it (the cloth's colour, a little lighter) and a hand of
+    # the same lightness but skin's chroma at its end; the rest is blue screen, which is not the person.
+    rng = np.random.default_rng(3)
+    cloth, hand = (150, 120, 90), (200, 140, 110)
+    lab = cv2.cvtColor(np.array([[cloth, hand]], np.uint8), cv2.COLOR_RGB2LAB)[0].astype(float)
+    chroma_distance = np.linalg.norm(lab[0, 1:] - lab[1, 1:])
+    image = colours(rng, 100 * 200, (40, 70, 180), 4).reshape(100, 200, 3)
+    silhouette = np.zeros((100, 200), bool)
+    silhouette[30:70, 10:150] = True
+    image[silhouette] = colours(rng, silhouette.sum(), cloth, 3)
+    patch, hand_mask = np.zeros_like(silhouette), np.zeros_like(silhouette)
+    patch[40:60, 40:60] = True
+    image[patch] = colours(rng, patch.sum(), (165, 132, 100), 3)   # the cloth lit more brightly
+    hand_mask[35:65, 150:185] = silhouette[35:65, 150:185] = True
+    image[hand_mask] = colours(rng, hand_mask.sum(), hand, 3)
+    skin = patch | hand_mask
+    hand_region, patch_region = skin_regions(skin, min_area=10)   # largest first: the hand is 30×35 px
+    assert surround_contrast(image, skin, patch_region, silhouette, 3) < 2
+    assert surround_contrast(image, skin, hand_region, silhouette, 3) == pytest.approx(chroma_distance, abs=2)
+    # With no person around it (the silhouette is the region itself) there is nothing to compare with.
+    assert surround_contrast(image, skin, hand_region, hand_mask, 3) is None
 
 
 def test_f1_score_of_known_masks():

@@ -14,6 +14,7 @@ Left and right: the face decides whether the camera sees the person's front (muc
 or back; from the front the person's left is on the image right. Keypoint names are those of
 mvpose_msgs/Skeleton plus "root" (the silhouette centroid).
 """
+import itertools
 import math
 import time
 from dataclasses import dataclass, field
@@ -25,7 +26,7 @@ from mvpose_nodes.body.model import LABEL_NONE
 from mvpose_nodes.vision.contour import ContourLabels, label_contour
 from mvpose_nodes.vision.silhouette import (BLUENESS_THRESHOLD, chroma_key_foreground, clean_mask, component_box,
                                               components, silhouette_keypoints)
-from mvpose_nodes.vision.skin import detect_skin, skin_regions
+from mvpose_nodes.vision.skin import detect_skin, skin_regions, surround_contrast
 
 ROLE_UNKNOWN, ROLE_FACE, ROLE_HAND, ROLE_FOREARM = range(4)   # SkinEllipse.ROLE_*
 SIDE_NONE, SIDE_LEFT, SIDE_RIGHT = range(3)                    # SkinEllipse.SIDE_*
@@ -40,6 +41,8 @@ NECK_BELOW_SHOULDERS = 0.04  # base of the neck below the row where the shoulder
 HEAD_REACH = 0.12        # a face's centre lies at most this share of the stature beside the head's top
 HAND_MAX_AREA = 0.02     # a hand's or forearm's skin region covers at most this share of the stature squared
 HAND_MAX_LENGTH = 0.2    # ... and its ellipse's semi-major axis at most this share of the stature
+HAND_MIN_CONTRAST = 5.0  # ... and its a*b* differ by at least this from the person around it (skin.surround_contrast)
+SURROUND_WIDTH = 0.008   # the band around a skin region that surround_contrast compares it with, as a share of the stature
 BOX_SCALE = 4            # the person is found on an image this many times smaller, then processed in its box
 BOX_MARGIN = 0.05        # of the person's size, around its box
 # The image sizes FeatureExtractor takes [px]: the person is first found at 1/BOX_SCALE of the size, which
@@ -156,7 +159,7 @@ class FeatureExtractor:
         skin[y0:y1, x0:x1] = skin_crop
         regions = skin_regions(skin_crop, min_area=min_skin)
         lap('skin')
-        ellipses, keypoints, hand_masks, frontness = self._interpret(regions, person, points, skin_crop)
+        ellipses, keypoints, hand_masks, frontness = self._interpret(regions, person, points, skin_crop, crop)
         lap('ellipses')
         contour = label_contour(person, {n: (k.x, k.y) if k.visible else None for n, k in keypoints.items()},
                                 hand_masks)
@@ -190,10 +193,11 @@ class FeatureExtractor:
         margin = int(BOX_MARGIN * max(w, h)) + 2 * BOX_SCALE
         return (max(x - margin, 0), max(y - margin, 0), min(x + w + margin, width), min(y + h + margin, height)), others
 
-    def _interpret(self, regions, silhouette, points, skin):
-        # In the person's box: `silhouette`, `skin`, `points` and `regions` are in its coordinates.
+    def _interpret(self, regions, silhouette, points, skin, rgb):
+        # In the person's box: `silhouette`, `skin`, `points`, `regions` and `rgb` are in its coordinates.
         """Ellipses with roles and sides, the keypoints, and the hands' masks for contour labelling."""
         stature = points.height
+        width = max(1, round(SURROUND_WIDTH * stature))
         ellipses = []
         for region in regions:
             if len(region.boundary) < 5:
@@ -208,7 +212,8 @@ class FeatureExtractor:
         keypoints['root'] = Keypoint(*points.root, 0.9, True)
         face = self._face(ellipses, points)
         front = self._head(face, keypoints, silhouette, points, skin, stature)
-        hand_masks = self._hands([e for e in ellipses if e is not face], keypoints, front, skin, stature)
+        hand_masks = self._hands([e for e in ellipses if e is not face], keypoints, front, skin, stature,
+                                 lambda region: surround_contrast(rgb, skin, region, silhouette, width))
         self._legs(points, keypoints, front)
         return [e for _, e in ellipses], keypoints, hand_masks, front
 
@@ -251,13 +256,18 @@ class FeatureExtractor:
         keypoints['head'] = Keypoint(top_x, top_y, 0.8, True)
         return frontness
 
-    def _hands(self, limb_ellipses, keypoints, frontness, skin, stature):
-        """Wrists and elbows from the (at most two) largest non-face skin regions of a hand's or forearm's size."""
+    def _hands(self, limb_ellipses, keypoints, frontness, skin, stature, contrast):
+        """Wrists and elbows from the (at most two) largest non-face skin regions of a hand's or forearm's size
+        that stand out from the person around them (contrast: SkinRegion -> surround_contrast)."""
         neck = np.array([keypoints['neck'].x, keypoints['neck'].y])
-        # Skin of a hand, or a forearm and hand, is at most so large; larger regions are clothes of skin's colour.
-        plausible = [e for e in limb_ellipses if e[1].area <= HAND_MAX_AREA * stature ** 2
-                     and e[1].semi_major <= HAND_MAX_LENGTH * stature]
-        hands = sorted(plausible, key=lambda e: -e[1].area)[:2]
+        # Skin of a hand, or a forearm and hand, is at most so large; larger regions are clothes of skin's colour,
+        # and so are smaller ones of the colour of the cloth around them.
+        def stands_out(region):
+            difference = contrast(region)
+            return difference is None or difference >= HAND_MIN_CONTRAST
+        hand_sized = sorted((e for e in limb_ellipses if e[1].area <= HAND_MAX_AREA * stature ** 2
+                             and e[1].semi_major <= HAND_MAX_LENGTH * stature), key=lambda e: -e[1].area)
+        hands = list(itertools.islice((e for e in hand_sized if stands_out(e[0])), 2))
         found = []
         for region, ellipse in hands:
             ends = sorted((ellipse.end_a, ellipse.end_b), key=lambda k: np.hypot(k.x - neck[0], k.y - neck[1]))
