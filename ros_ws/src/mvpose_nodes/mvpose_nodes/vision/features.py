@@ -42,7 +42,7 @@ HEAD_REACH = 0.12        # a face's centre lies at most this share of the statur
 HAND_MAX_AREA = 0.02     # a hand's or forearm's skin region covers at most this share of the stature squared
 HAND_MAX_LENGTH = 0.2    # ... and its ellipse's semi-major axis at most this share of the stature
 HAND_MIN_CONTRAST = 5.0  # ... and its a*b* differ by at least this from the person around it (skin.surround_contrast)
-SURROUND_WIDTH = 0.008   # the band around a skin region that surround_contrast compares it with, as a share of the stature
+SURROUND_BAND = 0.008    # the band around a skin region that surround_contrast compares it with, as a share of the stature
 BOX_SCALE = 4            # the person is found on an image this many times smaller, then processed in its box
 BOX_MARGIN = 0.05        # of the person's size, around its box
 # The image sizes FeatureExtractor takes [px]: the person is first found at 1/BOX_SCALE of the size, which
@@ -197,7 +197,7 @@ class FeatureExtractor:
         # In the person's box: `silhouette`, `skin`, `points`, `regions` and `rgb` are in its coordinates.
         """Ellipses with roles and sides, the keypoints, and the hands' masks for contour labelling."""
         stature = points.height
-        width = max(1, round(SURROUND_WIDTH * stature))
+        band = max(1, round(SURROUND_BAND * stature))   # [px]
         ellipses = []
         for region in regions:
             if len(region.boundary) < 5:
@@ -213,7 +213,7 @@ class FeatureExtractor:
         face = self._face(ellipses, points)
         front = self._head(face, keypoints, silhouette, points, skin, stature)
         hand_masks = self._hands([e for e in ellipses if e is not face], keypoints, front, skin, stature,
-                                 lambda region: surround_contrast(rgb, skin, region, silhouette, width))
+                                 lambda region: surround_contrast(rgb, skin, region, silhouette, band))
         self._legs(points, keypoints, front)
         return [e for _, e in ellipses], keypoints, hand_masks, front
 

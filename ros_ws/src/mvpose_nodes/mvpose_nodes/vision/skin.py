@@ -234,23 +234,24 @@ def skin_regions(mask, min_area=30):
     return sorted(regions, key=lambda region: -region.area)
 
 
-def surround_contrast(rgb, skin, region, silhouette, width):
+def surround_contrast(rgb, skin, region, silhouette, band):
     """How much a skin region's colour differs from the person around it: the CIE a*b* distance between the
-    mean colour of its pixels and that of the non-skin `silhouette` pixels within `width` px of it, or None
+    mean colour of its pixels and that of the non-skin `silhouette` pixels within `band` px of it, or None
     when there are none. rgb: the RGB uint8 (H, W, 3) image; skin, silhouette: bool (H, W) masks of it;
     region: a SkinRegion of `skin`. Colours in OpenCV's 8-bit Lab, whose a* and b* are CIE units + 128.
 
     Why: clothes whose colour is near skin's cross the skin threshold in patches, where their shading
     happens to match; such a patch has the colour of the cloth around it (a* b* within 1.5 in the median on
-    the suite's renders), while a hand or forearm differs from its sleeve or the shirt behind it (15)."""
-    height, width_px = skin.shape
+    the suite's tuning renders), while a hand or forearm differs from its sleeve or the shirt behind it (15)."""
+    height, width = skin.shape
     x, y, w, h = region.bbox
-    window = (slice(max(y - width, 0), min(y + h + width, height)), slice(max(x - width, 0), min(x + w + width, width_px)))
+    window = (slice(max(y - band, 0), min(y + h + band, height)),
+              slice(max(x - band, 0), min(x + w + band, width)))
     inside = np.zeros(skin[window].shape, np.uint8)
     cv2.drawContours(inside, [region.boundary.reshape(-1, 1, 2)], -1, 1, cv2.FILLED,
                      offset=(-window[1].start, -window[0].start))
     inside = inside.view(bool) & skin[window]
-    near = cv2.dilate(inside.view(np.uint8), np.ones((2 * width + 1,) * 2, np.uint8)).view(bool)
+    near = cv2.dilate(inside.view(np.uint8), np.ones((2 * band + 1,) * 2, np.uint8)).view(bool)
     around = near & ~skin[window] & silhouette[window]
     if not around.any() or not inside.any():
         return None
