@@ -89,11 +89,12 @@ _ORIENTING_END = [JOINT_INDEX[end] for _, (_, end, _) in _ORIENTING]
 _ORIENTING_REST = np.array([rest for _, (_, _, rest) in _ORIENTING], float)
 
 
-def torso_frame(joints):
+def torso_frame(joints, across=('right_hip', 'left_hip')):
     """3×3 rotation (columns x forward, y left, z up) of the torso from joints (15, 3) [m]:
-    z along pelvis→neck, y along right_hip→left_hip made orthogonal to z."""
+    z along pelvis→neck, y along the `across` pair of joints (right → left: the hips, or the shoulders)
+    made orthogonal to z."""
     up = normalize(joints[JOINT_INDEX['neck']] - joints[JOINT_INDEX['pelvis']])
-    left = joints[JOINT_INDEX['left_hip']] - joints[JOINT_INDEX['right_hip']]
+    left = joints[JOINT_INDEX[across[1]]] - joints[JOINT_INDEX[across[0]]]
     left = normalize(left - np.dot(left, up) * up)
     return np.column_stack([np.cross(left, up), left, up])
 

@@ -270,8 +270,10 @@ class SkeletonFitter:
                     # is nobody's in a pose with the arm down, and nothing would pull the arm up to it.
                     own = self.stages.outline_assignment(stage, alternative, oriented) if canonical else assigned
                     outcomes.append(self.stages.search(stage, alternative, oriented, own, frame))
-                searched, result = min(outcomes, key=(lambda outcome: self.stages.explained_cost(
-                    stage, outcome[0], oriented, frame)) if canonical else (lambda outcome: outcome[1].cost))
+                def rank(outcome):   # a start's searches have their own outline assignments: one footing
+                    return self.stages.explained_cost(stage, outcome[0], oriented, frame) if canonical \
+                        else outcome[1].cost
+                searched, result = min(outcomes, key=rank)
             parameters = searched
             results.append(result)
         return parameters, results

@@ -15,7 +15,7 @@ up from the pelvis to the neck, out towards the limb's own side, forward the way
 """
 import numpy as np
 
-from mvpose_nodes.body.model import JOINT_INDEX
+from mvpose_nodes.body.model import JOINT_INDEX, torso_frame
 
 ARM_POSES = (   # (upper arm, forearm)
     ((1, 0, 0), (1, 0, 0)),     # raised overhead
@@ -37,14 +37,10 @@ LEG_CHAIN = ('hip', 'knee', 'ankle')
 
 
 def torso_axes(joints):
-    """(up, left, forward) unit vectors (3,) of the torso of joints (15, 3) [m]: up from the pelvis to the neck,
-    left from the right shoulder to the left one made normal to up, forward = left × up."""
-    up = joints[JOINT_INDEX['neck']] - joints[JOINT_INDEX['pelvis']]
-    up /= np.linalg.norm(up)
-    left = joints[JOINT_INDEX['left_shoulder']] - joints[JOINT_INDEX['right_shoulder']]
-    left -= np.dot(left, up) * up
-    left /= np.linalg.norm(left)
-    return up, left, np.cross(left, up)
+    """(up, left, forward) unit vectors (3,) of the torso of joints (15, 3) [m]: model.torso_frame's axes with
+    left taken across the shoulders, which is where the arms hang from (the hips may turn with the legs)."""
+    forward, left, up = torso_frame(joints, across=('right_shoulder', 'left_shoulder')).T
+    return up, left, forward
 
 
 def posed_limbs(joints, poses, chain):

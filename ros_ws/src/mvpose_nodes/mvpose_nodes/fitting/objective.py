@@ -305,7 +305,12 @@ def outline_cost(points, starts, ends, radii, terminal, scale, gate):
     if not len(points):
         return 0.0
     nearest = np.minimum(capsule_residuals(points, starts, ends, radii, terminal).min(axis=1), gate)
-    return OUTLINE_STEP * float(np.sum(scale ** 2 * np.log1p((nearest / scale) ** 2)))
+    return OUTLINE_STEP * float(np.sum(cauchy_loss(nearest, scale)))
+
+
+def cauchy_loss(residuals, scale):
+    """scale²·log(1 + (e/scale)²) of residuals e [px] (any shape), the outline term's robust loss [px²]."""
+    return scale ** 2 * np.log1p((residuals / scale) ** 2)
 
 
 def outside_distances(outline, points):

@@ -29,8 +29,8 @@ from mvpose_nodes.body.model import (JOINT_INDEX, LABEL_HEAD, LABEL_LEFT_LEG, LA
 from mvpose_nodes.fitting.compiled import LABEL_SLOT, StagePack, fractions_arrays, nearest_capsules, search
 from mvpose_nodes.fitting.compiled_kinematics import bone_length_array
 from mvpose_nodes.fitting.limb_limits import LATERAL_STIFFNESS
-from mvpose_nodes.fitting.objective import (CAPSULE_RADII, OUTLINE_STEP, TERMINAL_BONES, inside_cost, limb_cost,
-                                            outline_cost)
+from mvpose_nodes.fitting.objective import (CAPSULE_RADII, OUTLINE_STEP, TERMINAL_BONES, cauchy_loss, inside_cost,
+                                            limb_cost, outline_cost)
 
 JOINT_LIMITS = {'left_shin_rx': (-2.6, 0.05), 'right_shin_rx': (-2.6, 0.05),     # knees bend backwards,
                 'left_forearm_rx': (-0.05, 2.6), 'right_forearm_rx': (-0.05, 2.6),  # elbows forwards [rad];
@@ -283,8 +283,7 @@ class StageSearch:
         settings = self.settings
         nearest = self.outline_nearest(parameters, views)
         unexplained = sum(int(np.count_nonzero(~within)) for _, within in nearest if within is not None)
-        scale = settings.outline_scale
-        capped = settings.outline_weight * OUTLINE_STEP * scale ** 2 * np.log1p((settings.outline_gate / scale) ** 2)
+        capped = settings.outline_weight * OUTLINE_STEP * cauchy_loss(settings.outline_gate, settings.outline_scale)
         return self.posed_cost(stage, parameters, views, frame, nearest) + capped * unexplained
 
     def posed_cost(self, stage, parameters, views, frame, nearest):
