@@ -2,7 +2,9 @@
 
 Per frame set: the views' keypoints are triangulated (initialisation.triangulated_joints) and a view's
 keypoint that disagrees with the others is left out (initialisation.consistent_views). The pose follows
-from the previous frame's, moved on at the pelvis's velocity, or, on the first frame, after a jump in time
+from the previous frame's, moved on at the pelvis's velocity (after a gap of over velocity_horizon, when
+frame sets were skipped to keep up: moved as far as the triangulated pelvis, its limbs started from the
+frame's triangulated joints, labelled by the side of the body they are on), or, on the first frame, after a jump in time
 and after the fit has lost the person (much of the outline unexplained for lost_frames fits), from an
 initialisation (initialisation.py: the keypoints' triangulation turned into angles by paper 004's
 method, bone lengths from the template scaled to the estimated height, the legs' length measured).
@@ -103,6 +105,7 @@ class SkeletonFitter:
         self.start_labels = None  # the start's triangulated joints, labelled (initial_parameters)
         self.face_right = None    # this frame set's person's right as the face says (initialisation.facing_right)
         self.legs_passed = False  # the fit's ankles have passed each other since the last probe of the legs
+        self.last_found = None    # the last frame set's triangulated joints {name: (3,) [m]} (or None)
 
     @property
     def parameters(self):
@@ -117,7 +120,7 @@ class SkeletonFitter:
             # Time went back: another recording (a bag played again, or someone else's), measured afresh,
             # so that the same bag gives the same skeletons; nor is its last pose this recording's.
             self.lengths, self.stages, self.measurements, self.track, self.rivals = None, None, [], None, []
-            self.given = None
+            self.given, self.last_found = None, None
         self.last_stamp = stamp
         found = triangulated_joints(views, settings)
         self.face_right = None
@@ -151,6 +154,7 @@ class SkeletonFitter:
             self.prune()
             if self.window <= 0 or not self.rivals:
                 self.compare()
+        self.last_found = found
         unexplained = unexplained_share(views, track.joints)
         self.lost_fits = self.lost_fits + 1 if unexplained > settings.lost_share else 0
         return Fit(track.joints, track.parameters, track.results, starting, time.perf_counter() - started,
@@ -211,23 +215,38 @@ class SkeletonFitter:
         self.rivals, self.starting, self.since_probe = [], False, 0
 
     def follow(self, track, stamp, views, found, canonical=False):
-        """Fit `track` to this frame set: from its last pose moved on at the pelvis's velocity (the
-        smoothness prior centred there too), the frame's triangulated pairs labelled by its continuity;
+        """Fit `track` to this frame set: from its last pose with the pelvis moved on (pelvis_shift; the
+        smoothness prior centred there too), the frame's triangulated pairs labelled by its fits
+        (LimbTracks.label);
         `canonical`: the limbs also searched from the canonical poses (a start)."""
         parameters = track.parameters.copy()
-        predicted = track.limbs.predicted(stamp)
-        if predicted is not None and track.limbs.history:
-            pelvis = JOINT_INDEX['pelvis']
-            parameters[TORSO_POSITION] += predicted[pelvis] - track.limbs.history[-1][1][pelvis]
-        labelled = None
-        if found is not None and track.limbs.history:
-            labelled = dict(found)
-            track.limbs.label(stamp, labelled)
+        labelled, gap = None, False
+        if track.limbs.history:
+            gap = stamp - track.limbs.history[-1][0] > self.settings.velocity_horizon
+            parameters[TORSO_POSITION] += self.pelvis_shift(track.limbs, stamp, found)
+            if found is not None:
+                labelled = dict(found)
+                track.limbs.label(stamp, labelled)
         elif found is not None:   # a start: the pairs as initial_parameters labelled them
             labelled = self.start_labels
-        track.parameters, track.results = self.search_stages(parameters, views, labelled, canonical)
+        last = None
+        if gap and labelled is not None:   # the last fit's limbs are half a stride away: the frame's are nearer
+            parameters, last = self.triangulated_limbs(parameters, labelled), parameters
+        track.parameters, track.results = self.search_stages(parameters, views, labelled, canonical, last)
         track.joints, _ = forward_kinematics(track.parameters, self.lengths)
         track.limbs.append(stamp, track.joints)
+
+    def pelvis_shift(self, limbs, stamp, found):
+        """How far (3,) [m] the pelvis has moved since the last fit of `limbs` (LimbTracks): on at the fits'
+        velocity, or, when that fit is over velocity_horizon old (frame sets skipped to keep up), as far as
+        the triangulated pelvis has moved since then (`found`: this frame set's triangulated joints), since
+        a walker's velocity from fits half a second apart misses by a stride."""
+        last_stamp, last_joints = limbs.history[-1]
+        shift = moved(self.last_found, found)
+        if shift is not None and stamp - last_stamp > self.settings.velocity_horizon:
+            return shift
+        pelvis = JOINT_INDEX['pelvis']
+        return limbs.predicted(stamp)[pelvis] - last_joints[pelvis]
 
     def cost_of(self, parameters, joints, views):
         """How well the pose `parameters` (29,), joints (15, 3) [m], explains the views: the six stages' objectives (without the
@@ -243,7 +262,7 @@ class SkeletonFitter:
             cost *= 1 + self.settings.face_cost_share
         return cost
 
-    def search_stages(self, parameters, views, found, canonical=False):
+    def search_stages(self, parameters, views, found, canonical=False, last=None):
         """The six stages of paper 000 Sec. 5.1 from `parameters` (29,); each stage after the torso's searched
         also from the frame's triangulated joints `found` ({joint: (3,)} or None) and, with `canonical` (a
         start), each limb stage from the canonical limb poses (limb_starts.py), the best result kept (Sec.
@@ -253,6 +272,7 @@ class SkeletonFitter:
             for name, position in found.items():
                 reference[JOINT_INDEX[name]] = position
         alternatives = None
+        afresh = canonical or last is not None   # starts far apart: each search's outline assigned from its own
         oriented = [oriented_view(view, reference) for view in views]
         frame = pack_frame(oriented)
         results = []
@@ -261,44 +281,50 @@ class SkeletonFitter:
             searched, result = self.stages.search(stage, parameters, oriented, assigned, frame)
             if stage != 'torso' and (found is not None or canonical):
                 if alternatives is None:   # starts relative to the fitted torso
-                    alternatives = self.alternative_starts(parameters, found, canonical)
+                    alternatives = self.alternative_starts(parameters, found, canonical, last)
                 outcomes = [(searched, result)]
                 for start in alternatives[stage]:
                     alternative = parameters.copy()
                     alternative[stage_indices(stage)] = start[stage_indices(stage)]
                     # From a canonical start the outline is assigned from that pose: a raised arm's outline
                     # is nobody's in a pose with the arm down, and nothing would pull the arm up to it.
-                    own = self.stages.outline_assignment(stage, alternative, oriented) if canonical else assigned
+                    own = self.stages.outline_assignment(stage, alternative, oriented) if afresh else assigned
                     outcomes.append(self.stages.search(stage, alternative, oriented, own, frame))
-                def rank(outcome):   # a start's searches have their own outline assignments: one footing
-                    return self.stages.explained_cost(stage, outcome[0], oriented, frame) if canonical \
+                def rank(outcome):   # searches with their own outline assignments: one footing
+                    return self.stages.explained_cost(stage, outcome[0], oriented, frame) if afresh \
                         else outcome[1].cost
                 searched, result = min(outcomes, key=rank)
             parameters = searched
             results.append(result)
         return parameters, results
 
-    def alternative_starts(self, parameters, found, canonical):
+    def alternative_starts(self, parameters, found, canonical, last=None):
         """{stage: [parameters (29,), ...]} to search each stage after the torso's from, besides `parameters`:
-        the limbs' triangulated joints `found` as angles relative to the fitted torso, and with `canonical`
-        the canonical limb poses (limb_starts.limb_start_joints) for the limb stages."""
-        fitted, _ = forward_kinematics(parameters, self.lengths)
+        the limbs' triangulated joints `found` as angles relative to the fitted torso (or, when `parameters`
+        already has them, `last`: the last fit's limbs), and with `canonical` the canonical limb poses
+        (limb_starts.limb_start_joints) for the limb stages."""
         starts = {stage: [] for stage in STAGE_NAMES[1:]}
         if found is not None:
-            hybrid = fitted.copy()
-            for name, position in found.items():
-                if name not in ('pelvis', 'neck'):
-                    hybrid[JOINT_INDEX[name]] = position
-            candidate = inverse_kinematics(hybrid)
+            candidate = self.triangulated_limbs(parameters, found) if last is None else last
             for stage in starts:
                 starts[stage].append(candidate)
         if canonical:
+            fitted, _ = forward_kinematics(parameters, self.lengths)
             arms, legs = limb_start_joints(fitted)
             for posed, stages in ((arms, ('left_arm', 'right_arm')), (legs, ('left_leg', 'right_leg'))):
                 for candidate in map(inverse_kinematics, posed):
                     for stage in stages:
                         starts[stage].append(candidate)
         return starts
+
+    def triangulated_limbs(self, parameters, found):
+        """The pose `parameters` (29,) with its limbs and head moved to the triangulated joints `found`
+        ({name: (3,)}; those it has), as angles relative to its torso (paper 004)."""
+        hybrid, _ = forward_kinematics(parameters, self.lengths)
+        for name, position in found.items():
+            if name not in ('pelvis', 'neck'):
+                hybrid[JOINT_INDEX[name]] = position
+        return inverse_kinematics(hybrid)
 
     def measure(self, joints):
         """Measure the person on triangulated joints {name: (3,) [m]} if they stand upright
@@ -328,6 +354,14 @@ class SkeletonFitter:
             self.lengths = person_lengths(found, self.settings)
             self.stages = StageSearch(self.settings, self.lengths)
         return inverse_kinematics(completed_joints(self.start_labels, self.lengths))
+
+
+def moved(before, after):
+    """The triangulated pelvis's displacement (3,) [m] between two frame sets' triangulated joints
+    {name: (3,)} (each or None), or None unless both have it."""
+    if before is None or after is None or 'pelvis' not in before or 'pelvis' not in after:
+        return None
+    return after['pelvis'] - before['pelvis']
 
 
 def unexplained_share(views, joints):

@@ -13,6 +13,7 @@ import numpy as np
 from mvpose_nodes.body.model import JOINT_INDEX, LABEL_LEFT_LEG, LABEL_RIGHT_LEG
 
 SWAPPABLE = {'legs': ('knee', 'ankle'), 'arms': ('elbow', 'wrist')}
+ACROSS_ROOT = {'knee': 'hip', 'ankle': 'hip', 'elbow': 'shoulder', 'wrist': 'shoulder'}   # where each limb starts
 
 
 def exchange(joints, name):
@@ -26,7 +27,8 @@ class LimbTracks:
     """Which of each triangulated left/right pair (knees, ankles, elbows, wrists) is the person's left: the
     labelling whose points lie nearer the positions predicted from the last two fits at constant velocity
     (decisive while the two limbs are far apart, mid-stride; weak when they pass each other, which the
-    stages' searches from both starts and the hypotheses make up for). Its remembered fits also give the
+    stages' searches from both starts and the hypotheses make up for); after a gap of over velocity_horizon,
+    by the side of the body each point is on (label_across). Its remembered fits also give the
     pelvis's velocity, which moves the next fit's start on.
     settings: FitterSettings (walking_baseline: how long fits are remembered)."""
 
@@ -55,6 +57,9 @@ class LimbTracks:
         predicted = self.predicted(stamp)
         if predicted is None:
             return
+        if stamp - self.history[-1][0] > self.settings.velocity_horizon:
+            label_across(found, self.history[-1][1])
+            return
         for name in ('knee', 'ankle', 'elbow', 'wrist'):
             left, right = f'left_{name}', f'right_{name}'
             if left not in found or right not in found:
@@ -64,6 +69,21 @@ class LimbTracks:
             if (np.sum((a - p_right) ** 2) + np.sum((b - p_left) ** 2)
                     < np.sum((a - p_left) ** 2) + np.sum((b - p_right) ** 2)):
                 exchange(found, name)
+
+
+def label_across(found, joints):
+    """Exchange, in `found` ({joint: (3,)} triangulated), the pairs whose left point lies right of the
+    right one across the body of `joints` (15, 3) [m]: (a − b)·(left_hip − right_hip) < 0 for the legs'
+    points a (left), b (right), the shoulders for the arms'. For fits too far apart in time for
+    continuity: half a second on, a walker's legs have changed places front to back, not side to side."""
+    for name in ('knee', 'ankle', 'elbow', 'wrist'):
+        left, right = f'left_{name}', f'right_{name}'
+        if left not in found or right not in found:
+            continue
+        root = ACROSS_ROOT[name]
+        across = joints[JOINT_INDEX[f'left_{root}']] - joints[JOINT_INDEX[f'right_{root}']]
+        if np.dot(found[left] - found[right], across) < 0:
+            exchange(found, name)
 
 
 def oriented_view(view, joints):

@@ -76,6 +76,9 @@ class FitterSettings:
     walking_baseline: float = setting(
         0.4, "[s] how long fits are remembered: the last two give each pair's predicted place and the pelvis's "
              'velocity', 0.04, 10.0)
+    velocity_horizon: float = setting(
+        0.1, "[s] after a longer gap since the last fit (frame sets skipped to keep up), the next fit starts with "
+             "the pelvis moved as far as the triangulated pelvis has moved, not on at the fits' velocity", 0.0, 10.0)
     hypothesis_frames: int = setting(
         5, 'frame sets over which other labellings of the body (turned round, legs or arms exchanged) are followed '
            'beside the fit before the one that explains the views best is kept', 1, 1000)

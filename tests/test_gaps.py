@@ -1,0 +1,64 @@
+"""Tracking across gaps (issue 14): at the bag's speed the fitter fits one frame set in several, half a
+second apart, and must stay on the person (fitter.SkeletonFitter.pelvis_shift, limb_sides.label_across,
+SkeletonFitter.triangulated_limbs). On rendered silhouettes of the CMU walk with exact keypoints."""
+import math
+
+import numpy as np
+import pytest
+
+from mvpose_nodes.body.camera import studio_rig
+from mvpose_nodes.body.kinematics import bone_lengths, forward_kinematics
+from mvpose_nodes.body.model import JOINT_INDEX
+from mvpose_nodes.fitting.fitter import SkeletonFitter
+from mvpose_nodes.fitting.limb_sides import label_across
+from mvpose_nodes.fitting.settings import FitterSettings
+
+from common import rendered_views
+
+pytestmark = pytest.mark.pure
+
+GAP = 12                   # frame sets between fits: 0.48 s at 25 fps, as at 1x on this machine
+FITTED = range(4, 60, GAP)  # five fits over 2 s of the walk: a stride and a half
+
+
+@pytest.fixture(scope='module')
+def sparse_walk(cmu_walk):
+    return rendered_views(cmu_walk.placed(heading=math.radians(-20)), studio_rig((960, 540), cameras=[3, 5, 7]),
+                          FITTED)
+
+
+def errors_with_gaps(frames, settings):
+    """Mean joint error [mm] of each fit of the frames, fitted at their times in the clip (25 fps)."""
+    fitter, errors = SkeletonFitter(settings), []
+    for index, (truth, views) in zip(FITTED, frames):
+        fit = fitter.fit(index / 25.0, views)
+        errors.append(1000 * np.linalg.norm(fit.joints - truth, axis=1).mean())
+    return errors
+
+
+def test_a_walk_fitted_half_a_second_apart_stays_on_the_person(sparse_walk):
+    errors = errors_with_gaps(sparse_walk, FitterSettings())
+    assert max(errors) < 40, errors
+
+
+def test_without_the_gaps_handled_the_fit_falls_behind(sparse_walk):
+    """The check above can fail: with every gap treated as a frame period (the pelvis moved on at the fits'
+    velocity, the pairs labelled by continuity, the limbs searched from the last fit), the fit is lost."""
+    errors = errors_with_gaps(sparse_walk, FitterSettings(velocity_horizon=10.0))
+    assert max(errors[1:]) > 100, errors
+
+
+def test_pairs_are_labelled_by_the_side_of_the_body_they_are_on():
+    """label_across: of a triangulated pair, the point on the left hip's (the left shoulder's) side is the
+    left one, however far the two are apart front to back."""
+    joints, _ = forward_kinematics(np.r_[0.0, 0.0, 1.0, np.zeros(26)], bone_lengths(1.75))
+    for name, root in (('knee', 'hip'), ('wrist', 'shoulder')):
+        left_root, right_root = joints[JOINT_INDEX[f'left_{root}']], joints[JOINT_INDEX[f'right_{root}']]
+        across = (left_root - right_root) / np.linalg.norm(left_root - right_root)
+        forward = np.cross(across, (0.0, 0.0, 1.0))
+        on_left, on_right = left_root + 0.4 * forward, right_root - 0.4 * forward   # a stride apart
+        found = {f'left_{name}': on_right, f'right_{name}': on_left, 'pelvis': joints[JOINT_INDEX['pelvis']]}
+        label_across(found, joints)
+        assert found[f'left_{name}'] is on_left and found[f'right_{name}'] is on_right
+        label_across(found, joints)   # labelled right: left as it is
+        assert found[f'left_{name}'] is on_left
