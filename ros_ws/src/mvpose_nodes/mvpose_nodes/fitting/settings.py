@@ -77,8 +77,9 @@ class FitterSettings:
         0.4, "[s] how long fits are remembered: the last two give each pair's predicted place and the pelvis's "
              'velocity', 0.04, 10.0)
     velocity_horizon: float = setting(
-        0.1, "[s] after a longer gap since the last fit (frame sets skipped to keep up), the next fit starts with "
-             "the pelvis moved as far as the triangulated pelvis has moved, not on at the fits' velocity", 0.0, 10.0)
+        0.1, "[s] a longer gap since the last fit (frame sets skipped to keep up) is bridged by the frame's own "
+             "triangulated joints: the pelvis moved as far as the triangulated one, not at the fits' velocity, the "
+             'limbs started there too, their left and right by the side of the body', 0.0, 10.0)
     hypothesis_frames: int = setting(
         5, 'frame sets over which other labellings of the body (turned round, legs or arms exchanged) are followed '
            'beside the fit before the one that explains the views best is kept', 1, 1000)
