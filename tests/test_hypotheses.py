@@ -14,7 +14,8 @@ from mvpose_nodes.body.camera import studio_rig
 from mvpose_nodes.body.model import JOINT_NAMES
 from mvpose_nodes.fitting import fitter as fitter_module
 from mvpose_nodes.fitting.fitter import SkeletonFitter
-from mvpose_nodes.fitting.hypotheses import RELABELLINGS, START_LABELLINGS, combined, relabelled_joints
+from mvpose_nodes.fitting.hypotheses import RELABELLINGS, START_LABELLINGS, combined, feet_outside, relabelled_joints
+from mvpose_nodes.fitting.limb_sides import mirrored_joints
 from mvpose_nodes.fitting.settings import FitterSettings
 
 from common import rendered_views
@@ -127,3 +128,26 @@ def test_the_face_the_views_see_weighs_on_front_and_back(standing, monkeypatch):
     for share, turned in ((10.0, True), (FitterSettings().face_cost_share, False), (0.0, False)):
         _, swapped = swapped_after_wrong_start(face_behind, (), monkeypatch, FitterSettings(face_cost_share=share))
         assert all(swapped[WITHIN:]) if turned else not any(swapped[WITHIN:]), (share, swapped)
+
+
+def test_the_feet_point_the_way_the_hips_face(walk):
+    """feet_outside: a point ahead of each ankle lies on the shoe for the true joints and off it, behind the
+    heel, for the same joints turned round, in every frame set of the walk."""
+    settings = FitterSettings()
+    for truth, views in walk:
+        right = feet_outside(views, truth, 1.75, settings.ankle_height)
+        turned = feet_outside(views, mirrored_joints(truth), 1.75, settings.ankle_height)
+        assert right < 0.2 * turned, (right, turned)
+
+
+def test_the_feet_overrule_a_misleading_face(standing, monkeypatch):
+    """A face seen on the back (every view's frontness inverted, as hair taken for skin gives it) weighed
+    more than the limbs' bent joints (face_cost_share 0.5) turns the fit round unless the feet are asked
+    (foot_weight): with them the fit faces the right way after WITHIN frame sets, without them it does not."""
+    from dataclasses import replace
+    face_behind = [(truth, [replace(view, frontness=1.0 - view.frontness) for view in views])
+                   for truth, views in standing]
+    for foot_weight, turned in ((FitterSettings().foot_weight, False), (0.0, True)):
+        _, swapped = swapped_after_wrong_start(face_behind, (), monkeypatch,
+                                               FitterSettings(face_cost_share=0.5, foot_weight=foot_weight))
+        assert any(swapped[WITHIN:]) if turned else not any(swapped[WITHIN:]), (foot_weight, swapped)

@@ -21,12 +21,12 @@ Left and right, front and back (beyond the paper; hypotheses.py): the same silho
 the same points labelled the other way round, every pair exchanged (turned round), or one pair of limbs
 exchanged. With the hips' and shoulders' turn, the thighs' adduction and the upper arms' reach across the
 body limited as anatomy limits them (stage_search.TWIST_LIMITS), a bent knee or elbow no longer fits the
-wrong way, nor do limbs crossed, so the objective tells them apart (and the face the views see, where the
-pose cannot): after a start, every other labelling is followed beside the fit for hypothesis_frames frame
-sets (those clearly worse dropped on the way: hypothesis_prune), and the one whose fits explain the views
-best is kept; after that, one other labelling at a time is followed so, every probe_period frame sets,
-and taken when it explains the views clearly better. Every tuning constant is
-a field of settings.FitterSettings.
+wrong way, nor do limbs crossed, so the objective tells them apart (and where the pose cannot, the way
+the feet point in the silhouettes and the face the views see): after a start, every other labelling is
+followed beside the fit for hypothesis_frames frame sets (those clearly worse dropped on the way:
+hypothesis_prune), and the one whose fits explain the views best is kept; after that, one other labelling
+at a time is followed so, every probe_period frame sets, and taken when it explains the views clearly
+better. Every tuning constant is a field of settings.FitterSettings.
 """
 import time
 from dataclasses import dataclass, field
@@ -37,7 +37,8 @@ from mvpose_nodes.body.camera import intrinsics, look_at
 from mvpose_nodes.body.kinematics import BONES, bone_lengths, forward_kinematics, inverse_kinematics
 from mvpose_nodes.body.model import JOINT_INDEX, LABEL_TORSO, STAGE_NAMES
 from mvpose_nodes.fitting.compiled import MAP_LABELS, nearest_capsules, pack_frame
-from mvpose_nodes.fitting.hypotheses import PROBES, RELABELLINGS, START_LABELLINGS, Track, relabelled_joints
+from mvpose_nodes.fitting.hypotheses import (PROBES, RELABELLINGS, START_LABELLINGS, Track, feet_outside,
+                                             relabelled_joints)
 from mvpose_nodes.fitting.initialisation import (completed_joints, consistent_views, facing_right, labelled_joints,
                                                  person_lengths, stature, triangulated_joints, upright)
 from mvpose_nodes.fitting.limb_sides import LimbTracks, exchanged_pairs, oriented_view
@@ -252,7 +253,8 @@ class SkeletonFitter:
         """How well the pose `parameters` (29,), joints (15, 3) [m], explains the views: the six stages' objectives (without the
         smoothness prior, with the joint limits) with each view's left/right labels oriented to the pose
         and the outline assigned from it; raised by face_cost_share when the pose's hips face away from the
-        face the views see (face_right)."""
+        face the views see (face_right), and by foot_weight per px² of its feet outside the silhouettes
+        (hypotheses.feet_outside)."""
         oriented = [oriented_view(view, joints) for view in views]
         frame = pack_frame(oriented)
         nearest = self.stages.outline_nearest(parameters, oriented)
@@ -260,6 +262,9 @@ class SkeletonFitter:
         hips = joints[JOINT_INDEX['right_hip']] - joints[JOINT_INDEX['left_hip']]
         if self.face_right is not None and np.dot(hips, self.face_right) < 0:
             cost *= 1 + self.settings.face_cost_share
+        if self.settings.foot_weight:
+            cost += self.settings.foot_weight * feet_outside(views, joints, stature(self.lengths),
+                                                             self.settings.ankle_height)
         return cost
 
     def search_stages(self, parameters, views, found, canonical=False, last=None):

@@ -92,6 +92,10 @@ class FitterSettings:
     face_cost_share: float = setting(
         0.2, "a labelling whose hips face away from the face the views see (initialisation.facing_right) has its "
              "fit's cost raised by this share when labellings are compared (0: the face is not asked)", 0.0, 100.0)
+    foot_weight: float = setting(
+        1.0, 'per px² of a point of a foot, ahead of the ankle where the hips face, outside the silhouette, added to '
+             "a labelling's cost when labellings are compared (hypotheses.feet_outside; 0: the feet are not asked)",
+        0.0, 1e4)
     probe_period: int = setting(
         10, 'frame sets between probes: one other labelling at a time followed beside the fit', 1, 100000)
     hypothesis_margin: float = setting(
