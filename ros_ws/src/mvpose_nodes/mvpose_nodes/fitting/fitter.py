@@ -4,10 +4,10 @@ Per frame set: the views' keypoints are triangulated (initialisation.triangulate
 keypoint that disagrees with the others is left out (initialisation.consistent_views). The pose follows
 from the previous frame's, moved on at the pelvis's velocity (after a gap of over velocity_horizon, when
 frame sets were skipped to keep up: moved as far as the triangulated pelvis, its limbs started from the
-frame's triangulated joints, labelled by the side of the body they are on), or, on the first frame, after a jump in time
-and after the fit has lost the person (much of the outline unexplained for lost_frames fits), from an
-initialisation (initialisation.py: the keypoints' triangulation turned into angles by paper 004's
-method, bone lengths from the template scaled to the estimated height, the legs' length measured).
+frame's triangulated joints, labelled by the side of the body they are on), or, on the first frame, after
+a jump in time and after the fit has lost the person (much of the outline unexplained for lost_frames
+fits), from an initialisation (initialisation.py: the keypoints' triangulation turned into angles by paper
+004's method, bone lengths from the template scaled to the estimated height, the legs' length measured).
 Then six Nelder–Mead searches (Sec. 5.1, stage_search.py): torso, head and neck, left arm, right arm,
 left leg, right leg, each over its own parameters with the rest fixed, each minimising its own objective.
 Paper 000 Sec. 5.3 avoids local minima by good starts: each limb stage is searched from the previous
@@ -243,7 +243,7 @@ class SkeletonFitter:
         the triangulated pelvis has moved since then (`found`: this frame set's triangulated joints), since
         a walker's velocity from fits half a second apart misses by a stride."""
         last_stamp, last_joints = limbs.history[-1]
-        shift = moved(self.last_found, found)
+        shift = pelvis_displacement(self.last_found, found)
         if shift is not None and stamp - last_stamp > self.settings.velocity_horizon:
             return shift
         pelvis = JOINT_INDEX['pelvis']
@@ -361,7 +361,7 @@ class SkeletonFitter:
         return inverse_kinematics(completed_joints(self.start_labels, self.lengths))
 
 
-def moved(before, after):
+def pelvis_displacement(before, after):
     """The triangulated pelvis's displacement (3,) [m] between two frame sets' triangulated joints
     {name: (3,)} (each or None), or None unless both have it."""
     if before is None or after is None or 'pelvis' not in before or 'pelvis' not in after:

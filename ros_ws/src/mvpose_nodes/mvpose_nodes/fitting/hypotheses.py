@@ -31,8 +31,8 @@ from mvpose_nodes.fitting.limb_sides import LimbTracks, exchange, exchanged_pair
 from mvpose_nodes.fitting.objective import outside_distances
 
 # A point of each foot, ahead of the ankle where the hips face and below it, which a labelling turned round
-# puts behind the heel, off the shoe: FOOT_REACH of the stature ahead (15 cm at 1.75 m: a foot is about
-# 15 % of the stature, the ankle over its back third).
+# puts behind the heel, off the shoe: FOOT_REACH of the stature ahead (15 cm at 1.75 m, the ball of the
+# foot: a foot is about 15 % of the stature long, the ankle over its back third).
 FOOT_REACH = 0.085
 FOOT_CAP_PX = 50.0   # [px] a foot point's distance outside the silhouette counts up to this (a hidden foot)
 # Only a foot on the ground lies flat, pointing the way the body faces; a swinging foot points down. A foot
@@ -96,10 +96,11 @@ def feet_outside(views, joints, stature, ankle_height):
     """Σ over the views with an outline (fitter.View) and the feet on the ground (STANCE_HEIGHT) of the
     squared distance [px²] (each capped at FOOT_CAP_PX) outside the silhouette of a point of the foot:
     FOOT_REACH × stature [m] ahead of the ankle, level, along the hips' forward direction
-    (body.model.torso_frame), and half the ankle's height (ankle_height, a share of the stature) below it. Beyond the paper: a person's feet point the
-    way the hips face, which the silhouette shows in every view that sees a foot from the side; with the
-    true joints of the suite's 34 tuning cases (578 frame sets), the body turned round has the larger sum
-    in 96 % of frame sets (by over 400 px² in 91 %), the true one in 3 % (by over 400 px² in 2 %)."""
+    (body.model.torso_frame), and half the ankle's height (ankle_height, a share of the stature) below it.
+    Beyond the paper: a person's feet point the way the hips face, which the silhouette shows in every view
+    that sees a foot from the side; with the true joints of the suite's 34 tuning cases (578 frame sets),
+    the body turned round has the larger sum in 96 % of frame sets (by over 400 px² in 91 %), the true one
+    in 3 % (by over 400 px² in 2 %)."""
     forward = torso_frame(joints)[:, 0].copy()
     forward[2] = 0.0
     length = np.linalg.norm(forward)
