@@ -221,9 +221,8 @@ class SkeletonFitter:
         (LimbTracks.label);
         `canonical`: the limbs also searched from the canonical poses (a start)."""
         parameters = track.parameters.copy()
-        labelled, gap = None, False
+        labelled = None
         if track.limbs.history:
-            gap = stamp - track.limbs.history[-1][0] > self.settings.velocity_horizon
             parameters[TORSO_POSITION] += self.pelvis_shift(track.limbs, stamp, found)
             if found is not None:
                 labelled = dict(found)
@@ -231,7 +230,8 @@ class SkeletonFitter:
         elif found is not None:   # a start: the pairs as initial_parameters labelled them
             labelled = self.start_labels
         last = None
-        if gap and labelled is not None:   # the last fit's limbs are half a stride away: the frame's are nearer
+        # After a gap the last fit's limbs are half a stride away: the frame's triangulated ones are nearer.
+        if track.limbs.after_gap(stamp) and labelled is not None:
             parameters, last = self.triangulated_limbs(parameters, labelled), parameters
         track.parameters, track.results = self.search_stages(parameters, views, labelled, canonical, last)
         track.joints, _ = forward_kinematics(track.parameters, self.lengths)
@@ -242,12 +242,11 @@ class SkeletonFitter:
         velocity, or, when that fit is over velocity_horizon old (frame sets skipped to keep up), as far as
         the triangulated pelvis has moved since then (`found`: this frame set's triangulated joints), since
         a walker's velocity from fits half a second apart misses by a stride."""
-        last_stamp, last_joints = limbs.history[-1]
         shift = pelvis_displacement(self.last_found, found)
-        if shift is not None and stamp - last_stamp > self.settings.velocity_horizon:
+        if shift is not None and limbs.after_gap(stamp):
             return shift
         pelvis = JOINT_INDEX['pelvis']
-        return limbs.predicted(stamp)[pelvis] - last_joints[pelvis]
+        return limbs.predicted(stamp)[pelvis] - limbs.history[-1][1][pelvis]
 
     def cost_of(self, parameters, joints, views):
         """How well the pose `parameters` (29,), joints (15, 3) [m], explains the views: the six stages' objectives (without the

@@ -40,6 +40,11 @@ class LimbTracks:
         baseline = self.settings.walking_baseline
         self.history = [(t, p) for t, p in self.history if stamp - t <= baseline] + [(stamp, joints.copy())]
 
+    def after_gap(self, stamp):
+        """Whether `stamp` [s] comes over velocity_horizon after the last fit (frame sets skipped to keep up):
+        too long for the fits' continuity and velocity to say where the limbs and the pelvis are now."""
+        return bool(self.history) and stamp - self.history[-1][0] > self.settings.velocity_horizon
+
     def predicted(self, stamp):
         """Joints (15, 3) expected at `stamp` (constant velocity from the last two fits), or None."""
         if not self.history:
@@ -57,7 +62,7 @@ class LimbTracks:
         predicted = self.predicted(stamp)
         if predicted is None:
             return
-        if stamp - self.history[-1][0] > self.settings.velocity_horizon:
+        if self.after_gap(stamp):
             label_across(found, self.history[-1][1])
             return
         for name in ('knee', 'ankle', 'elbow', 'wrist'):
