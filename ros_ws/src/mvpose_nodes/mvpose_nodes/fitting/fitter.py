@@ -4,10 +4,11 @@ Per frame set: the views' keypoints are triangulated (initialisation.triangulate
 keypoint that disagrees with the others is left out (initialisation.consistent_views). The pose follows
 from the previous frame's, moved on at the pelvis's velocity (after a gap of over velocity_horizon, when
 frame sets were skipped to keep up: moved as far as the triangulated pelvis, its limbs started from the
-frame's triangulated joints, labelled by the side of the body they are on), or, on the first frame, after
-a jump in time and after the fit has lost the person (much of the outline unexplained for lost_frames
-fits), from an initialisation (initialisation.py: the keypoints' triangulation turned into angles by paper
-004's method, bone lengths from the template scaled to the estimated height, the legs' length measured).
+frame's triangulated joints, after one of over continuity_horizon labelled by the side of the body they
+are on), or, on the first frame, after a jump in time and after the fit has lost the person (much of the
+outline unexplained for lost_frames fits), from an initialisation (initialisation.py: the keypoints'
+triangulation turned into angles by paper 004's method, bone lengths from the template scaled to the
+estimated height, the legs' length measured).
 Then six Nelder–Mead searches (Sec. 5.1, stage_search.py): torso, head and neck, left arm, right arm,
 left leg, right leg, each over its own parameters with the rest fixed, each minimising its own objective.
 Paper 000 Sec. 5.3 avoids local minima by good starts: each limb stage is searched from the previous

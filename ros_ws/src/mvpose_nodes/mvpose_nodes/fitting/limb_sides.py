@@ -27,7 +27,7 @@ class LimbTracks:
     """Which of each triangulated left/right pair (knees, ankles, elbows, wrists) is the person's left: the
     labelling whose points lie nearer the positions predicted from the last two fits at constant velocity
     (decisive while the two limbs are far apart, mid-stride; weak when they pass each other, which the
-    stages' searches from both starts and the hypotheses make up for); after a gap of over velocity_horizon,
+    stages' searches from both starts and the hypotheses make up for); after a gap of over continuity_horizon,
     by the side of the body each point is on (label_across). Its remembered fits also give the
     pelvis's velocity, which moves the next fit's start on.
     settings: FitterSettings (walking_baseline: how long fits are remembered)."""
@@ -40,10 +40,12 @@ class LimbTracks:
         baseline = self.settings.walking_baseline
         self.history = [(t, p) for t, p in self.history if stamp - t <= baseline] + [(stamp, joints.copy())]
 
-    def after_gap(self, stamp):
-        """Whether `stamp` [s] comes over velocity_horizon after the last fit (frame sets skipped to keep up):
-        too long for the fits' continuity and velocity to say where the limbs and the pelvis are now."""
-        return bool(self.history) and stamp - self.history[-1][0] > self.settings.velocity_horizon
+    def after_gap(self, stamp, horizon=None):
+        """Whether `stamp` [s] comes over `horizon` [s] (default velocity_horizon) after the last fit (frame
+        sets skipped to keep up): too long for the fits' velocity to say where the limbs and the pelvis are
+        now (with continuity_horizon: for their continuity to say which limb of a pair is which)."""
+        horizon = self.settings.velocity_horizon if horizon is None else horizon
+        return bool(self.history) and stamp - self.history[-1][0] > horizon
 
     def predicted(self, stamp):
         """Joints (15, 3) expected at `stamp` (constant velocity from the last two fits), or None."""
@@ -62,7 +64,7 @@ class LimbTracks:
         predicted = self.predicted(stamp)
         if predicted is None:
             return
-        if self.after_gap(stamp):
+        if self.after_gap(stamp, self.settings.continuity_horizon):
             label_across(found, self.history[-1][1])
             return
         for name in ('knee', 'ankle', 'elbow', 'wrist'):

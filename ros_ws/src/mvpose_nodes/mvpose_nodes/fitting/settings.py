@@ -78,8 +78,12 @@ class FitterSettings:
              'velocity', 0.04, 10.0)
     velocity_horizon: float = setting(
         0.1, "[s] a longer gap since the last fit (frame sets skipped to keep up) is bridged by the frame's own "
-             "triangulated joints: the pelvis moved as far as the triangulated one, not at the fits' velocity, the "
-             'limbs started there too, their left and right by the side of the body', 0.0, 10.0)
+             "triangulated joints: the pelvis moved as far as the triangulated one, not at the fits' velocity, and the "
+             'limbs started there too', 0.0, 10.0)
+    continuity_horizon: float = setting(
+        0.14, "[s] up to this long after the last fit the frame's triangulated left/right pairs are labelled by "
+              'continuity with the fits, after a longer gap by the side of the body they are on (continuity is the '
+              'surer of the two up to 3 frame periods at 25 fps, the side from 4 on: docs/method.md)', 0.0, 10.0)
     hypothesis_frames: int = setting(
         5, 'frame sets over which other labellings of the body (turned round, legs or arms exchanged) are followed '
            'beside the fit before the one that explains the views best is kept', 1, 1000)
