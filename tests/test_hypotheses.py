@@ -140,6 +140,18 @@ def test_the_feet_point_the_way_the_hips_face(walk):
         assert right < 0.2 * turned, (right, turned)
 
 
+def test_no_foot_counts_off_the_floor(walk):
+    """feet_outside asks only the feet on the floor: with the whole body lifted off it (a hop's or a run's
+    flight, whose feet point down), it counts nothing for either labelling, while on the floor the same
+    frame sets' feet are counted."""
+    settings = FitterSettings()
+    lift = np.array([0.0, 0.0, 0.3])   # [m]
+    for truth, views in walk:
+        for joints in (truth, mirrored_joints(truth)):
+            assert feet_outside(views, joints + lift, 1.75, settings.ankle_height) == 0.0
+    assert all(feet_outside(views, mirrored_joints(truth), 1.75, settings.ankle_height) > 0 for truth, views in walk)
+
+
 def test_the_feet_overrule_a_misleading_face(standing, monkeypatch):
     """A face seen on the back (every view's frontness inverted, as hair taken for skin gives it) weighed
     more than the limbs' bent joints (face_cost_share 0.5) turns the fit round unless the feet are asked
