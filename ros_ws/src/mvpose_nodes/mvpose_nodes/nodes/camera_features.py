@@ -17,6 +17,7 @@ answered with empty features carrying a status; the node keeps running.
 """
 import collections
 
+import cv2
 import numpy as np
 from mvpose_msgs.msg import LabelledContour, SkinEllipseArray
 from rcl_interfaces.msg import SetParametersResult
@@ -45,6 +46,7 @@ class CameraFeaturesNode(ReportOnce, Node):
         super().__init__('camera_features')
         self.camera = camera_of_namespace(self.get_namespace(), 'camera_features')
         self.values = declare_parameters(self, CAMERA_FEATURES)
+        cv2.setNumThreads(self.values['opencv_threads'] or -1)   # OpenCV: a negative count is its default
         self.extractor = self.make_extractor(self.values)
         self.background = BackgroundLearner(self.values['background_frames'])
         self.add_on_set_parameters_callback(self.on_set_parameters)

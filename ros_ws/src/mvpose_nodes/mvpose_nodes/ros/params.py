@@ -159,6 +159,10 @@ CAMERA_FEATURES = (
               "image's stamp on frame_available and compute features only for the images it asks for, as every "
               'camera does: a graph slower than the cameras then skips whole frame sets before any features are '
               'computed; false: features of every image'),
+    Parameter('opencv_threads', 1, "OpenCV's worker threads in this node: 1, as the graph runs a process per camera "
+              "beside the fitter and OpenCV's own threads only add switching (`./mvpose bench` on 2 cores: 11.4-12.3 "
+              '-> 12.5-12.8 frame sets/s); 0: OpenCV\'s default, one per core (a camera with a host to itself)',
+              range=(0, 256), read_only=True),
 )
 FEATURE_SETTING_NAMES = {f.name for f in fields(FeatureSettings)}
 
