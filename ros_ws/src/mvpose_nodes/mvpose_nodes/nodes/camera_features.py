@@ -33,7 +33,7 @@ from mvpose_nodes.ros.params import (CAMERA_FEATURES, ParameterError, changed_va
                                      default_skin_model_path, feature_settings_from)
 from mvpose_nodes.vision.features import FeatureExtractor, draw_features
 from mvpose_nodes.vision.silhouette import BackgroundLearner
-from mvpose_nodes.vision.skin import SkinModel, SkinModelError
+from mvpose_nodes.vision.skin import SkinModel, SkinModelError, warm_up
 
 STREAM_DEPTH = 5
 # Images kept for the fitter's requests: 0.4 s at 25 fps, far longer than a request takes to follow the
@@ -47,6 +47,7 @@ class CameraFeaturesNode(ReportOnce, Node):
         self.camera = camera_of_namespace(self.get_namespace(), 'camera_features')
         self.values = declare_parameters(self, CAMERA_FEATURES)
         cv2.setNumThreads(self.values['opencv_threads'] or -1)   # OpenCV: a negative count is its default
+        warm_up()
         self.extractor = self.make_extractor(self.values)
         self.background = BackgroundLearner(self.values['background_frames'])
         self.add_on_set_parameters_callback(self.on_set_parameters)

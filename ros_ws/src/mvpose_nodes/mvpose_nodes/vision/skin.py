@@ -262,6 +262,13 @@ def surround_contrast(rgb, skin, region, silhouette, band):
     return float(np.linalg.norm(mean_chroma(inside) - mean_chroma(around)))
 
 
+def warm_up():
+    """Convert one pixel to Lab, so that OpenCV builds its 8-bit RGB→Lab tables (surround_contrast's
+    conversion; 60–70 ms on the first call, a sixth of a 1080p image's features) while a node starts,
+    not in its first image. The camera_features node calls this."""
+    cv2.cvtColor(np.zeros((1, 1, 3), np.uint8), cv2.COLOR_RGB2LAB)
+
+
 def mask_counts(predicted, truth):
     """(true positives, predicted, true) pixel counts of two bool masks of the same shape."""
     if predicted.shape != truth.shape:
