@@ -77,7 +77,8 @@ def test_pairs_a_few_frame_periods_on_are_labelled_by_continuity():
     forward = np.cross(across, (0.0, 0.0, 1.0))
     middle = (left_hip + right_hip) / 2 - (0.0, 0.0, 0.8)
     fitted = joints.copy()   # a stride: the left foot 0.3 m ahead, the right one 0.3 m behind, in line
-    fitted[JOINT_INDEX['left_ankle']], fitted[JOINT_INDEX['right_ankle']] = middle + 0.3 * forward, middle - 0.3 * forward
+    fitted[JOINT_INDEX['left_ankle']] = middle + 0.3 * forward
+    fitted[JOINT_INDEX['right_ankle']] = middle - 0.3 * forward
     ahead = middle + 0.35 * forward - 0.03 * across   # 0.12 s on: the left foot, a little right of the line
     behind = middle - 0.3 * forward
     for gap, horizon, left in ((0.12, settings.continuity_horizon, ahead), (0.12, 0.0, behind),

@@ -60,7 +60,8 @@ class LimbTracks:
     def label(self, stamp, found):
         """Exchange, in `found` ({joint: (3,)} triangulated), the pairs nearer the other side's predicted
         positions: (d(a, p_r)² + d(b, p_l)² − d(a, p_l)² − d(b, p_r)²) < 0 for the pair's points a (left),
-        b (right) and predictions p_l, p_r."""
+        b (right) and predictions p_l, p_r; over continuity_horizon after the last fit, the pairs on the
+        other side of its body (label_across)."""
         predicted = self.predicted(stamp)
         if predicted is None:
             return
