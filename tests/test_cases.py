@@ -162,6 +162,19 @@ def test_every_camera_of_a_drawn_rig_sees_a_tall_person_standing_near_the_middle
             assert pixels[:, 1].min() >= -0.5 and pixels[:, 1].max() <= height - 0.5, (case.index, camera.number)
 
 
+def test_full_views_counts_the_cameras_that_see_every_joint(drawn):
+    """A tall person standing in the middle of a 6 m ring is seen whole by its cameras 1, 3 and 5 (ring_rig:
+    camera k at angle (k − 1)·45°, camera 1 on +x); 2 m towards camera 1, too near it to be seen whole by it;
+    2.5 m, out of camera 3's side of the image too; 1.2 m past camera 1, behind it: camera 5 alone."""
+    ring = cases.draw_case(cases.case_rng(3, 0), 0, MOTIONS, FRAMES, (1920, 1080), cameras=(1, 3, 5))
+    ring = replace(ring, rig=tuple(ring_rig((1920, 1080), diameter=6.0, height=2.0, aim=(0.0, 0.0, 1.0),
+                                             focal_scale=6.0 / (2 * RIG_RADIUS))))
+    standing = standing_people(cases.PERSON_HEIGHT[1], 0.0)[0]
+    walked = np.array([standing + [x, 0.0, 0.0] for x in (0.0, 2.0, 2.5, 4.2)])
+    assert cases.full_views(ring, walked).tolist() == [3, 2, 1, 1]
+    assert cases.full_views(drawn[0], standing[None]).tolist() == [len(drawn[0].cameras)]
+
+
 def blueness(rgb):
     """b − max(r, g) of 8-bit RGB pixels (…, 3), as int."""
     rgb = rgb.astype(int)

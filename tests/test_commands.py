@@ -220,6 +220,26 @@ def test_the_suite_passes_over_frame_sets_in_the_steps_it_is_given():
     assert np.flatnonzero(~passed_over_by(10, [4], seed=0)).tolist() == [0, 4, 8]
 
 
+def test_the_suite_keeps_each_window_in_view():
+    """A run crosses a ring in two seconds: its windows are shortened until every frame shows the whole person
+    to MIN_FULL_VIEWS cameras, and no further (one frame more would not); a turn on the spot keeps its 50."""
+    from types import SimpleNamespace
+    from mvpose_nodes.app import suite
+    from mvpose_nodes.studio.cases import MIN_FULL_VIEWS, full_views
+    from mvpose_nodes.studio.catalogue import load_motion
+    runs = suite.draw_cases(SimpleNamespace(motions='amp_run', seed=1, frames=50, cameras=None, cases=4),
+                            (1920, 1080))
+    assert any(case.frames < 50 for case in runs)
+    for case in runs:
+        assert (full_views(case, suite.case_motion(case).joints) >= MIN_FULL_VIEWS).all(), case.index
+        if case.frames < 50:
+            longer = suite.placed_window(load_motion(case.motion, height=case.height), case, case.frames + 1)
+            assert (full_views(case, longer.joints) < MIN_FULL_VIEWS).any(), case.index
+    turns = suite.draw_cases(SimpleNamespace(motions='turn_on_the_spot', seed=1, frames=50, cameras=None, cases=3),
+                             (1920, 1080))
+    assert [case.frames for case in turns] == [50, 50, 50]
+
+
 def test_suite_features_cache_reads_back_what_it_wrote_and_recomputes_a_damaged_file(tmp_path, capsys,
                                                                                      monkeypatch):
     from types import SimpleNamespace

@@ -26,6 +26,9 @@ instead, as a studio fits its lenses to its room. And aimed at 0.7 m, the head l
 image already at 0.93–1.05 × the room's lens (with the aim 0.5 m off the middle and the principal
 point 20 px off); aimed at 1.0 m, the middle of the tallest person, the worst case allows 1.21 ×, so
 the ±15 % asked for holds with no tightening. The studio's rig itself (studio_rig) is unchanged.
+A motion that travels further leaves the views (a run crosses a 6–10 m ring in two seconds, past the
+cameras); the suite shortens such a window until every frame shows the whole person to at least
+MIN_FULL_VIEWS of the case's cameras (full_views; app/suite.py, in_view).
 
 Draws happen in a fixed order, every value is always drawn (even when `cameras` is given or the motion
 is shorter than the window), so a Generator seeded alike gives the same case: the suite seeds one per
@@ -63,6 +66,7 @@ BLUR = (0.3, 1.5)            # [px] scene.Realism.blur, in the case's images
 JPEG_QUALITY = (60, 95)      # inclusive
 SHADOWS_SHARE = 0.75
 JITTER = 0.003               # [s] ± per camera: its stamp's offset from the frame's instant
+MIN_FULL_VIEWS = 2           # cameras that see the whole person in every frame of a window: a 3D fit needs two
 
 
 @dataclass(frozen=True, eq=False)
@@ -72,10 +76,10 @@ class Case:
     index: the case's number in its run; seed: the seed of its rendering's own random choices (per-camera
     gains, sensor noise: pass it to Realism.finish); motion: the motion's name; start: the window's
     first index into the motion (0 = its first frame); frames: the window's length (the motion's, when
-    shorter than asked); heading [rad] and centre (x, y) [m]: where the window is placed
-    (BodyMotion.placed); height [m]: the person's; appearance: scene.Appearance; rig: all 8 cameras
-    (body.camera.Camera, numbers 1..8); cameras: the numbers used (3 or 8, ascending); realism:
-    scene.Realism; shadows: floor shadows on; jpeg_quality; jitter: per used camera (in `cameras`
+    shorter than asked; the suite shortens it to keep the person in view); heading [rad] and centre
+    (x, y) [m]: where the window is placed (BodyMotion.placed); height [m]: the person's; appearance:
+    scene.Appearance; rig: all 8 cameras (body.camera.Camera, numbers 1..8); cameras: the numbers used
+    (3 or 8, ascending); realism: scene.Realism; shadows: floor shadows on; jpeg_quality; jitter: per used camera (in `cameras`
     order) its stamp offset [s]; resolution: (width, height) [px]."""
     index: int
     seed: int
@@ -93,6 +97,22 @@ class Case:
     jpeg_quality: int
     jitter: tuple
     resolution: tuple
+
+
+def full_views(case, joints):
+    """(F,) int: per frame of `joints` (F, 15, 3) [m], how many of the case's cameras see the whole person:
+    all 15 joints in front of the camera and inside its image."""
+    width, height = case.resolution
+    counts = np.zeros(len(joints), int)
+    for camera in case.rig:
+        if camera.number not in case.cameras:
+            continue
+        pixels, depths = camera.project(joints.reshape(-1, 3))
+        pixels, depths = pixels.reshape(*joints.shape[:2], 2), depths.reshape(joints.shape[:2])
+        inside = (depths > 0) & (pixels[..., 0] >= 0) & (pixels[..., 0] < width) \
+            & (pixels[..., 1] >= 0) & (pixels[..., 1] < height)
+        counts += inside.all(axis=1)
+    return counts
 
 
 def case_rng(seed, index):
