@@ -88,3 +88,22 @@ def test_pairs_a_few_frame_periods_on_are_labelled_by_continuity():
         found = {'left_ankle': ahead, 'right_ankle': behind}
         tracks.label(gap, found)
         assert found['left_ankle'] is left, (gap, horizon)
+
+
+def test_searches_after_a_skipped_frame_set_are_ranked_on_their_own_outlines(cmu_walk, monkeypatch):
+    """SkeletonFitter.search_stages: a frame set one period after the last fit keeps the last fit's outline
+    assignment for every search of a stage; over outline_horizon after it (a frame set skipped), each search
+    is ranked by how well it explains the outline assigned from its own start (StageSearch.explained_cost)."""
+    from mvpose_nodes.fitting.stage_search import StageSearch
+    frames = rendered_views(cmu_walk.placed(heading=math.radians(-20)), studio_rig((960, 540), cameras=[3, 5, 7]),
+                            [4, 5, 7])
+    ranked = []
+    explained_cost = StageSearch.explained_cost
+    monkeypatch.setattr(StageSearch, 'explained_cost', lambda *args: ranked.append(1) or explained_cost(*args))
+    for horizon, rankings in ((FitterSettings().outline_horizon, [0, 1]), (1.0, [0, 0])):
+        fitter, counts = SkeletonFitter(FitterSettings(outline_horizon=horizon, hypothesis_frames=1)), []
+        for index, (_, views) in zip([4, 5, 7], frames):
+            ranked.clear()
+            fitter.fit(index / 25.0, views)
+            counts.append(bool(ranked))
+        assert counts[1:] == [bool(r) for r in rankings], (horizon, counts)

@@ -234,7 +234,8 @@ class SkeletonFitter:
         # After a gap the last fit's limbs are half a stride away: the frame's triangulated ones are nearer.
         if track.limbs.after_gap(stamp) and labelled is not None:
             parameters, last = self.triangulated_limbs(parameters, labelled), parameters
-        track.parameters, track.results = self.search_stages(parameters, views, labelled, canonical, last)
+        stale = track.limbs.after_gap(stamp, self.settings.outline_horizon)
+        track.parameters, track.results = self.search_stages(parameters, views, labelled, canonical, last, stale)
         track.joints, _ = forward_kinematics(track.parameters, self.lengths)
         track.limbs.append(stamp, track.joints)
 
@@ -267,17 +268,20 @@ class SkeletonFitter:
                                                              self.settings.ankle_height)
         return cost
 
-    def search_stages(self, parameters, views, found, canonical=False, last=None):
+    def search_stages(self, parameters, views, found, canonical=False, last=None, stale=False):
         """The six stages of paper 000 Sec. 5.1 from `parameters` (29,); each stage after the torso's searched
         also from the frame's triangulated joints `found` ({joint: (3,)} or None) and, with `canonical` (a
         start), each limb stage from the canonical limb poses (limb_starts.py), the best result kept (Sec.
-        5.3). Returns the fitted parameters and the stage_search.StageResults."""
+        5.3). `last`: the last fit's parameters when `parameters` are already the triangulated limbs (a gap
+        over velocity_horizon); `stale`: the last fit is over outline_horizon old. Returns the fitted
+        parameters and the stage_search.StageResults."""
         reference, _ = forward_kinematics(parameters, self.lengths)
         if found is not None:
             for name, position in found.items():
                 reference[JOINT_INDEX[name]] = position
         alternatives = None
-        afresh = canonical or last is not None   # starts far apart: each search's outline assigned from its own
+        # Starts far apart, or the last fit's outline assignment stale: each search's outline assigned from its own.
+        afresh = canonical or last is not None or stale
         oriented = [oriented_view(view, reference) for view in views]
         frame = pack_frame(oriented)
         results = []

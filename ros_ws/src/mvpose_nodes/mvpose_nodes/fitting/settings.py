@@ -84,6 +84,11 @@ class FitterSettings:
         0.14, "[s] up to this long after the last fit the frame's triangulated left/right pairs are labelled by "
               'continuity with the fits, after a longer gap by the side of the body they are on (continuity is the '
               'surer of the two up to 3 frame periods at 25 fps, the side from 4 on: docs/method.md)', 0.0, 10.0)
+    outline_horizon: float = setting(
+        0.06, "[s] after a longer gap since the last fit (a frame set or more skipped) each stage's searches are "
+              'ranked by how well each explains the outline assigned from its own start, as at a start: the last '
+              "fit's assignment is stale by then (on the suite's tuning cases with gaps of 1-3 frame sets, 58 "
+              'cases: 84.8 -> 82.7 mm mean, docs/method.md)', 0.0, 10.0)
     hypothesis_frames: int = setting(
         5, 'frame sets over which other labellings of the body (turned round, legs or arms exchanged) are followed '
            'beside the fit before the one that explains the views best is kept', 1, 1000)
