@@ -100,10 +100,10 @@ def test_searches_after_a_skipped_frame_set_are_ranked_on_their_own_outlines(cmu
     ranked = []
     explained_cost = StageSearch.explained_cost
     monkeypatch.setattr(StageSearch, 'explained_cost', lambda *args: ranked.append(1) or explained_cost(*args))
-    for horizon, rankings in ((FitterSettings().outline_horizon, [0, 1]), (1.0, [0, 0])):
+    for horizon, ranked_afresh in ((FitterSettings().outline_horizon, [False, True]), (1.0, [False, False])):
         fitter, counts = SkeletonFitter(FitterSettings(outline_horizon=horizon, hypothesis_frames=1)), []
         for index, (_, views) in zip([4, 5, 7], frames):
             ranked.clear()
             fitter.fit(index / 25.0, views)
             counts.append(bool(ranked))
-        assert counts[1:] == [bool(r) for r in rankings], (horizon, counts)
+        assert counts[1:] == ranked_afresh, (horizon, counts)

@@ -79,8 +79,8 @@ class Case:
     shorter than asked; the suite shortens it to keep the person in view); heading [rad] and centre
     (x, y) [m]: where the window is placed (BodyMotion.placed); height [m]: the person's; appearance:
     scene.Appearance; rig: all 8 cameras (body.camera.Camera, numbers 1..8); cameras: the numbers used
-    (3 or 8, ascending); realism: scene.Realism; shadows: floor shadows on; jpeg_quality; jitter: per used camera (in `cameras`
-    order) its stamp offset [s]; resolution: (width, height) [px]."""
+    (3 or 8, ascending); realism: scene.Realism; shadows: floor shadows on; jpeg_quality; jitter: per
+    used camera (in `cameras` order) its stamp offset [s]; resolution: (width, height) [px]."""
     index: int
     seed: int
     motion: str
