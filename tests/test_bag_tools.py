@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 import yaml
-from common import Background, assert_one_line_error, run_mvpose, spin_for, spin_until
+from common import ROOT, Background, assert_one_line_error, run_mvpose, spin_for, spin_until
 from mvpose_msgs.msg import Skeleton
 from rosbags.highlevel import AnyReader
 from rosgraph_msgs.msg import Clock
@@ -235,12 +235,26 @@ KILL_TRIALS = 5
 # A message is on the disk at the recorder's next flush (bag.FLUSH_PERIOD, 1 s) after it came; it
 # comes within this much of being published (DDS and the recorder's executor) on this 2-core machine.
 DELIVERY_SLACK = 0.2      # [s]
-# The killed recorders talk UDP only. A process SIGKILLed while using Fast DDS's shared-memory transport leaves
-# its port behind; a later participant reusing the port id finds it a zombie and makes it again, while a
-# writer that lived on (this test's publisher) may keep the old one, and the new recorder then receives
-# nothing from it (eProsima/Fast-DDS#5053, #4728; measured here: 2 of 28 trials nothing within 15 s,
-# UDP only 0 of 28, docs/commands.md). This test is about the recorder's file, not Fast DDS's recovery.
-KILLED_TRANSPORTS = {'FASTDDS_BUILTIN_TRANSPORTS': 'UDPv4'}
+# Each killed recorder is a DDS participant of its own id (its Fast DDS profile: config/fastdds.xml with
+# <participantID>), so none reuses the shared-memory port of one killed before it. A participant SIGKILLed
+# leaves its port behind; the next to take the same id finds it a zombie and makes it again, while a writer
+# that lived on (this test's publisher) may keep the old one, and the new recorder then gets that writer's
+# messages late or never (eProsima/Fast-DDS#5053, #4728; measured here with one publisher living on: reusing
+# the ids, a recorder's first message reached the disk 0.7-9.9 s after the match, mostly 2.7-3.5 s, and 3 of 58
+# recorders got nothing within 12-15 s; with ids of their own, 0.5-0.9 s, and 0 of 45; docs/commands.md).
+# This test is about the recorder's file, not Fast DDS's recovery.
+KILLED_PARTICIPANT_IDS = 60   # the first; well above the ids the automatic choice gives a test's few participants
+FASTDDS_PROFILE = ROOT / 'ros_ws' / 'src' / 'mvpose_nodes' / 'config' / 'fastdds.xml'
+
+
+def own_participant_profile(folder, participant_id):
+    """The environment of a process whose DDS participant has `participant_id`: a copy of
+    config/fastdds.xml with <participantID> written into `folder`."""
+    text = FASTDDS_PROFILE.read_text()
+    assert '<rtps>' in text
+    profile = folder / f'participant{participant_id}.xml'
+    profile.write_text(text.replace('<rtps>', f'<rtps><participantID>{participant_id}</participantID>', 1))
+    return {'FASTRTPS_DEFAULT_PROFILES_FILE': str(profile)}
 
 
 def jpeg_images(count):
@@ -298,7 +312,8 @@ def test_recorder_killed_at_random_moments_loses_at_most_its_last_second(tmp_pat
     """Issue 15: `bag record` of 1080p JPEGs at 25 Hz, SIGKILLed 2-10 s after its first message reached the
     disk (5 seeded moments): the bag opens (`bag info` says it is unfinished), it holds every message published more than
     a flush period (plus DELIVERY_SLACK) before the kill, byte-exact and in order, and `bag reindex`
-    finishes it into a bag the independent rosbags reader reads. The recorders talk UDP only (KILLED_TRANSPORTS)."""
+    finishes it into a bag the independent rosbags reader reads. Each recorder has a DDS participant id of its
+    own (KILLED_PARTICIPANT_IDS)."""
     import random
     import signal
     import rclpy
@@ -317,7 +332,8 @@ def test_recorder_killed_at_random_moments_loses_at_most_its_last_second(tmp_pat
             bag = tmp_path / f'killed{trial}'
             topic = KILL_TOPIC.format(trial=trial)
             publisher = node.create_publisher(CompressedImage, topic, 100)
-            recorder = Background('bag', 'record', '--topics', topic, '-o', bag, environment=KILLED_TRANSPORTS)
+            recorder = Background('bag', 'record', '--topics', topic, '-o', bag,
+                                  environment=own_participant_profile(tmp_path, KILLED_PARTICIPANT_IDS + trial))
             try:
                 spin_until(node, lambda: publisher.get_subscription_count() > 0, 30, 'the recorder to subscribe')
                 # The moment counts from the first message on the disk: the recorder's start (its subscription
