@@ -49,14 +49,21 @@ def test_without_the_gaps_handled_the_fit_falls_behind(sparse_walk):
     assert max(errors[1:]) > 100, errors
 
 
+def standing_body(root):
+    """A 1.75 m person standing at the origin: joints (15, 3) [m], and the unit vectors across the body
+    (from the right `root` joint, e.g. 'hip', to the left one) and forward (level)."""
+    joints, _ = forward_kinematics(np.r_[0.0, 0.0, 1.0, np.zeros(26)], bone_lengths(1.75))
+    left_root, right_root = joints[JOINT_INDEX[f'left_{root}']], joints[JOINT_INDEX[f'right_{root}']]
+    across = (left_root - right_root) / np.linalg.norm(left_root - right_root)
+    return joints, across, np.cross(across, (0.0, 0.0, 1.0))
+
+
 def test_pairs_are_labelled_by_the_side_of_the_body_they_are_on():
     """label_across: of a triangulated pair, the point on the left hip's (the left shoulder's) side is the
     left one, however far the two are apart front to back."""
-    joints, _ = forward_kinematics(np.r_[0.0, 0.0, 1.0, np.zeros(26)], bone_lengths(1.75))
     for name, root in (('knee', 'hip'), ('wrist', 'shoulder')):
+        joints, across, forward = standing_body(root)
         left_root, right_root = joints[JOINT_INDEX[f'left_{root}']], joints[JOINT_INDEX[f'right_{root}']]
-        across = (left_root - right_root) / np.linalg.norm(left_root - right_root)
-        forward = np.cross(across, (0.0, 0.0, 1.0))
         on_left, on_right = left_root + 0.4 * forward, right_root - 0.4 * forward   # a stride apart
         found = {f'left_{name}': on_right, f'right_{name}': on_left, 'pelvis': joints[JOINT_INDEX['pelvis']]}
         label_across(found, joints)
@@ -71,11 +78,8 @@ def test_pairs_a_few_frame_periods_on_are_labelled_by_continuity():
     triangulated 3 cm right of the right one, which the side of the body (label_across) would exchange;
     after a longer gap, when a walker's feet may have changed places front to back, the side decides."""
     settings = FitterSettings()
-    joints, _ = forward_kinematics(np.r_[0.0, 0.0, 1.0, np.zeros(26)], bone_lengths(1.75))
-    left_hip, right_hip = joints[JOINT_INDEX['left_hip']], joints[JOINT_INDEX['right_hip']]
-    across = (left_hip - right_hip) / np.linalg.norm(left_hip - right_hip)
-    forward = np.cross(across, (0.0, 0.0, 1.0))
-    middle = (left_hip + right_hip) / 2 - (0.0, 0.0, 0.8)
+    joints, across, forward = standing_body('hip')
+    middle = (joints[JOINT_INDEX['left_hip']] + joints[JOINT_INDEX['right_hip']]) / 2 - (0.0, 0.0, 0.8)
     fitted = joints.copy()   # a stride: the left foot 0.3 m ahead, the right one 0.3 m behind, in line
     fitted[JOINT_INDEX['left_ankle']] = middle + 0.3 * forward
     fitted[JOINT_INDEX['right_ankle']] = middle - 0.3 * forward
