@@ -16,15 +16,15 @@ from mvpose_nodes.vision.skin import SkinModel
 pytestmark = pytest.mark.cli
 
 
-def render_studio_frame(walk, heading_deg=45, camera_number=3, looks=None):
+def render_studio_frame(walk, heading_deg=45, camera_number=3, looks=None, size=(960, 540)):
     """(rgb, labels, camera, pose, empty): the middle frame of `walk` placed with the heading, seen in one
-    960×540 studio camera, with its ground truth and the same view without the person."""
+    studio camera of `size` (width, height) [px], with its ground truth and the same view without the person."""
     from mvpose_nodes.studio import scene
     looks = looks or scene.Appearance()
     motion = walk.placed(heading=math.radians(heading_deg))
     i = len(motion.joints) // 2
     pose = scene.BodyPose(motion.joints[i], motion.toes[i], motion.hand_tips[i], motion.head_forward[i])
-    camera = studio_rig((960, 540), cameras=[camera_number])[0]
+    camera = studio_rig(size, cameras=[camera_number])[0]
     view = scene.prepare_camera(camera)
     rendering = scene.render(view, pose, looks, *scene.floor_shadow(pose, looks))
     rgb, labels = scene.Realism().finish(rendering, view, camera_number, 0, 0)
@@ -71,6 +71,31 @@ def test_pipeline_with_a_learned_background(studio_frame):
     # Without the blue screen the edges are less clean (the person is only 15 000 px at this size), and
     # the floor shadow must be told from the person by its colour: a lower bar than the chroma key's.
     check_against_truth(features, labels, camera, pose, min_iou=0.9)
+
+
+def test_a_reduced_box_gives_the_full_images_features_in_its_pixels(cmu_walk):
+    # At 1080p the person's box is about 600 rows: the default person_rows (250) halves it (box_reduction),
+    # 0 keeps it whole.
+    from mvpose_nodes.studio.scene import SKIN_BIT
+    from mvpose_nodes.vision.features import box_reduction, contour_label_agreement
+    assert [box_reduction(rows, 250) for rows in (249, 499, 500, 2000)] == [1, 1, 2, 2]
+    assert box_reduction(2000, 0) == 1
+    rgb, labels, camera, pose, _ = render_studio_frame(cmu_walk, size=(1920, 1080))
+    full = extractor(FeatureSettings(person_rows=0))(rgb)
+    reduced = extractor()(rgb)
+    check_against_truth(reduced, labels, camera, pose)
+    assert reduced.silhouette.shape == full.silhouette.shape
+    assert (reduced.silhouette & full.silhouette).sum() > 0.95 * (reduced.silhouette | full.silhouette).sum()
+    for name, keypoint in full.keypoints.items():   # in the full image's pixels, within the reduction's rounding
+        if keypoint.visible and name in ('root', 'head', 'neck'):
+            assert np.hypot(reduced.keypoints[name].x - keypoint.x, reduced.keypoints[name].y - keypoint.y) < 4, name
+    points = reduced.contour.points
+    steps = np.abs(np.diff(np.vstack([points, points[:1]]), axis=0))
+    assert steps.max() <= 1, 'the enlarged contour is a closed chain of 8-neighbours'
+    # as long as the full image's but for its jaggies (unenlarged it would be half as long)
+    assert 0.8 * len(full.contour.points) < len(points) <= len(full.contour.points)
+    truth_labels = labels & ~np.uint8(SKIN_BIT)
+    assert contour_label_agreement(reduced.contour, truth_labels) > contour_label_agreement(full.contour, truth_labels) - 0.05
 
 
 def test_patches_of_trousers_of_skin_colour_are_not_taken_for_hands(cmu_walk, monkeypatch):

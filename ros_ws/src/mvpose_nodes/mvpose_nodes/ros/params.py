@@ -154,6 +154,11 @@ CAMERA_FEATURES = (
     Parameter('sleeves', FeatureSettings.sleeves, "clothing assumption for the arms' skin: 'short' (forearm ellipses "
               "give elbow and hand), 'long' (hand only) or 'auto' (decided per region from its elongation)",
               choices=('auto', 'short', 'long')),
+    Parameter('person_rows', FeatureSettings.person_rows,
+              "[px] a person's box at least twice this many rows high is keyed at full resolution, then its "
+              "features are computed at half resolution (each pixel the mean of 2 × 2) and given in the full "
+              "image's pixels: at 1080p the features take about half the CPU (docs/method.md); 0: always at "
+              'full resolution', range=(0, 10000)),
     Parameter('publish_overlay', False, 'also publish features_overlay: the image with every feature drawn on'),
     Parameter('follow_requests', True, 'while a skeleton_fitter asks for frames on frame_request, announce each '
               "image's stamp on frame_available and compute features only for the images it asks for, as every "

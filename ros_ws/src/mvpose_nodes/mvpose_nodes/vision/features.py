@@ -13,6 +13,10 @@ WRIST_FRACTION of the way from the elbow end to the hand end of a forearm ellips
 Left and right: the face decides whether the camera sees the person's front (much skin on the head)
 or back; from the front the person's left is on the image right. Keypoint names are those of
 mvpose_msgs/Skeleton plus "root" (the silhouette centroid).
+
+Resolution: the person is found on a BOX_SCALE times smaller image, keyed in its box at full resolution,
+and, where the box has rows to spare (FeatureSettings.person_rows, box_reduction), everything after that
+runs on the box reduced by a whole factor; the features come back in the full image's pixels (_enlarged).
 """
 import itertools
 import math
@@ -24,8 +28,8 @@ import numpy as np
 
 from mvpose_nodes.body.model import LABEL_NONE
 from mvpose_nodes.vision.contour import ContourLabels, label_contour
-from mvpose_nodes.vision.silhouette import (BLUENESS_THRESHOLD, chroma_key_foreground, clean_mask, component_box,
-                                              components, silhouette_keypoints)
+from mvpose_nodes.vision.silhouette import (BLUENESS_THRESHOLD, CLOSING_PX, OPENING_PX, chroma_key_foreground, clean_mask,
+                                              component_box, components, silhouette_keypoints)
 from mvpose_nodes.vision.skin import detect_skin, skin_regions, surround_contrast
 
 ROLE_UNKNOWN, ROLE_FACE, ROLE_HAND, ROLE_FOREARM = range(4)   # SkinEllipse.ROLE_*
@@ -50,6 +54,7 @@ BOX_MARGIN = 0.05        # of the person's size, around its box
 # image would take seconds and gigabytes.
 MIN_IMAGE_SIDE = 8 * BOX_SCALE
 MAX_IMAGE_PIXELS = 25_000_000
+MAX_REDUCTION = 2        # the box is reduced at most this many times (FeatureSettings.person_rows)
 KEYPOINT_NAMES = ('root', 'head', 'neck', 'left_wrist', 'right_wrist', 'left_elbow', 'right_elbow',
                   'left_ankle', 'right_ankle', 'left_knee', 'right_knee')
 
@@ -63,6 +68,7 @@ class FeatureSettings:
     skin_threshold: float = 1.0             # log-likelihood ratio L above which a pixel is skin
     skin_min_area_fraction: float = 0.00003  # smallest skin region, as a share of the image area
     sleeves: str = 'auto'                   # 'short', 'long' or 'auto' (from the regions' elongation)
+    person_rows: int = 250                  # [px] the box is reduced while the person keeps this many rows (0: never)
 
 
 @dataclass
@@ -142,11 +148,21 @@ class FeatureExtractor:
         if box is None:
             lap('silhouette')
             return Features(False, silhouette, skin, keypoints={n: Keypoint() for n in KEYPOINT_NAMES}, timings=timings)
-        # Everything after finding the person works in its box: a tenth of a 1080p image or less.
+        # Everything after finding the person works in its box: a tenth of a 1080p image or less, and that
+        # reduced r times (box_reduction), its sides whole multiples of r.
         x0, y0, x1, y1 = box
+        r = box_reduction(y1 - y0, s.person_rows)
+        x1, y1 = x0 + (x1 - x0) // r * r, y0 + (y1 - y0) // r * r
         crop = rgb[y0:y1, x0:x1]
-        person = clean_mask(self._foreground(crop, (slice(y0, y1), slice(x0, x1))), min_area=min_person)
-        silhouette[y0:y1, x0:x1] = person
+        foreground = self._foreground(crop, (slice(y0, y1), slice(x0, x1)))
+        if r > 1:   # keyed at full resolution (a pixel half blue screen is neither), then the majority of r × r
+            size = ((x1 - x0) // r, (y1 - y0) // r)
+            crop = cv2.resize(crop, size, interpolation=cv2.INTER_AREA)
+            foreground = cv2.resize(foreground.astype(np.uint8) * 255, size, interpolation=cv2.INTER_AREA) > 127
+        # The clean-up's radii are the full image's: a closing of 4 reduced px would join legs 6 px apart.
+        person = clean_mask(foreground, min_area=min_person // r ** 2, opening=-(-OPENING_PX // r),
+                            closing=-(-CLOSING_PX // r))
+        silhouette[y0:y1, x0:x1] = enlarged_mask(person, r)
         if self.background is not None:
             self.background.update(rgb, silhouette)
         lap('silhouette')
@@ -155,9 +171,9 @@ class FeatureExtractor:
         if points is None:
             return Features(False, silhouette, skin, keypoints={n: Keypoint() for n in KEYPOINT_NAMES}, timings=timings)
         min_skin = max(10, int(s.skin_min_area_fraction * area))
-        skin_crop = detect_skin(self.skin_model, crop, s.skin_threshold, region=person, min_area=min_skin)
-        skin[y0:y1, x0:x1] = skin_crop
-        regions = skin_regions(skin_crop, min_area=min_skin)
+        skin_crop = detect_skin(self.skin_model, crop, s.skin_threshold, region=person, min_area=min_skin // r ** 2)
+        skin[y0:y1, x0:x1] = enlarged_mask(skin_crop, r)
+        regions = skin_regions(skin_crop, min_area=min_skin // r ** 2)
         lap('skin')
         ellipses, keypoints, hand_masks, frontness = self._interpret(regions, person, points, skin_crop, crop)
         lap('ellipses')
@@ -165,7 +181,7 @@ class FeatureExtractor:
                                 hand_masks)
         lap('contour')
         features = Features(True, silhouette, skin, ellipses, keypoints, contour, frontness, timings, other_people)
-        return _shifted(features, x0, y0)
+        return _shifted(_enlarged(features, r), x0, y0)
 
     def _foreground(self, rgb, window):
         """Foreground pixels of `rgb`, which is the part `window` (row and column slices) of the image."""
@@ -314,6 +330,53 @@ class FeatureExtractor:
             keypoints[f'{side}_ankle'] = Keypoint(*leg['ankle'], leg['confidence'], True)
             if leg['knee'] is not None:
                 keypoints[f'{side}_knee'] = Keypoint(*leg['knee'], leg['confidence'] * 0.8, True)
+
+
+def box_reduction(rows, person_rows):
+    """The whole factor r (1 … MAX_REDUCTION) by which a person's box `rows` [px] high is reduced before its
+    features are computed (INTER_AREA: each pixel the mean of r × r; FeatureSettings.person_rows): the
+    largest that keeps `person_rows` rows of it, 1 with person_rows 0. The features' cost goes with the
+    box's pixels, while a person of a few hundred rows still gives contours and keypoints within a pixel or
+    two of the full image's (figures: docs/method.md, camera features)."""
+    return int(np.clip(rows // person_rows, 1, MAX_REDUCTION)) if person_rows else 1
+
+
+def enlarged_mask(mask, factor):
+    """A (H, W) bool mask `factor` times larger, (factor·H, factor·W): bilinearly interpolated (pixel centres
+    aligned as in _enlarged) and cut at one half, so that its edges are not steps of `factor` pixels."""
+    if factor == 1:
+        return mask
+    height, width = mask.shape
+    return cv2.resize(mask.astype(np.uint8) * 255, (factor * width, factor * height),
+                      interpolation=cv2.INTER_LINEAR) > 127
+
+
+def _enlarged(features, factor):
+    """Features computed on an image reduced `factor` times, in the pixels of the full image: a reduced
+    pixel (u, v) covers full pixels factor·u … factor·u + factor − 1, so its centre is factor·u + (factor −
+    1)/2 (keypoints, ellipse centres and ends; areas × factor²). The contour stays a chain of 8-neighbours:
+    each point is followed by factor − 1 points on the way to the next (its label and side repeated;
+    landmark indices × factor), its pixels the full pixels nearest those centres (factor·u + (factor − 1) // 2)."""
+    if factor == 1:
+        return features
+    centre = (factor - 1) / 2
+    for keypoint in features.keypoints.values():
+        keypoint.x, keypoint.y = factor * keypoint.x + centre, factor * keypoint.y + centre
+    for ellipse in features.ellipses:
+        ellipse.center = (factor * ellipse.center[0] + centre, factor * ellipse.center[1] + centre)
+        ellipse.semi_major, ellipse.semi_minor, ellipse.area = (factor * ellipse.semi_major, factor * ellipse.semi_minor,
+                                                               factor ** 2 * ellipse.area)
+        for end in (ellipse.end_a, ellipse.end_b):
+            end.x, end.y = factor * end.x + centre, factor * end.y + centre
+    contour = features.contour
+    if contour is not None and len(contour.points):
+        points = factor * contour.points.astype(np.int64) + (factor - 1) // 2
+        steps = np.roll(points, -1, axis=0) - points   # to the next point (the contour is closed)
+        chain = points[:, None] + steps[:, None] * np.arange(factor)[None, :, None] // factor
+        features.contour = ContourLabels(chain.reshape(-1, 2).astype(np.int32), np.repeat(contour.labels, factor),
+                                         np.repeat(contour.sides, factor),
+                                         {name: factor * index for name, index in contour.landmarks.items()})
+    return features
 
 
 def _shifted(features, dx, dy):

@@ -18,6 +18,8 @@ import numpy as np
 BLUENESS_THRESHOLD = 25   # [DN] b − max(r, g) above which a pixel is blue screen
 MIN_PERSON_AREA = 2000    # [px] at 1080p: smaller blobs are not a person (scaled with the image area)
 MAX_HOLE_FRACTION = 0.002  # holes up to this share of the person's area are keying misses, and filled
+OPENING_PX = 2            # [px] clean_mask's opening radius: keying noise
+CLOSING_PX = 4            # [px] clean_mask's closing radius: small gaps (as little as fills no gap between the legs)
 # Anthropometric bands, as fractions of the silhouette height above its lowest pixel (person standing).
 LEG_CUT = 0.36            # legs are the silhouette below this height (below the hands, above the knees)
 ANKLE_HEIGHT = 0.03       # the ankle joint above the lowest pixel of its foot, as a share of the stature
@@ -122,7 +124,8 @@ class BackgroundLearner:
         return model
 
 
-def clean_mask(foreground, min_area=MIN_PERSON_AREA, opening=2, closing=4, max_hole_fraction=MAX_HOLE_FRACTION):
+def clean_mask(foreground, min_area=MIN_PERSON_AREA, opening=OPENING_PX, closing=CLOSING_PX,
+               max_hole_fraction=MAX_HOLE_FRACTION):
     """The person's blob: opening (radius `opening` px), closing (radius `closing`), the largest
     8-connected component if it has at least `min_area` px, its small holes filled (up to
     `max_hole_fraction` of its area: keying misses, not the real gaps between legs or arm and body,
