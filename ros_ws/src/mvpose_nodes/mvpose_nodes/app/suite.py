@@ -241,10 +241,14 @@ def run_case(case, true_lengths=False, features_cache=None, gaps=None):
     joints = np.full((count, 15, 3), np.nan)
     statuses, seconds = [None] * count, []
     passed_over = np.zeros(count, bool) if gaps is None else passed_over_by(count, gaps, case.seed)
+    skipped = 0
     for index, (stamp, messages) in enumerate(case_features(case, motion, features_cache)):
         if passed_over[index]:
+            skipped += 1
             continue
-        result = fitting.fit(stamp, {number: (cameras[number], *pair) for number, pair in messages.items()})
+        result = fitting.fit(stamp, {number: (cameras[number], *pair) for number, pair in messages.items()},
+                             skipped=skipped)
+        skipped = 0
         if result.message is not None:
             joints[index] = joints_from_skeleton(result.message)
             statuses[index] = result.message.status

@@ -5,10 +5,10 @@ keypoint that disagrees with the others is left out (initialisation.consistent_v
 from the previous frame's, moved on at the pelvis's velocity (after a gap of over velocity_horizon, when
 frame sets were skipped to keep up: moved as far as the triangulated pelvis, its limbs started from the
 frame's triangulated joints, after one of over continuity_horizon labelled by the side of the body they
-are on), or, on the first frame, after a jump in time and after the fit has lost the person (much of the
-outline unexplained for lost_frames fits), from an initialisation (initialisation.py: the keypoints'
-triangulation turned into angles by paper 004's method, bone lengths from the template scaled to the
-estimated height, the legs' length measured).
+are on), or, on the first frame, after a jump in time (not a gap in which frame sets were skipped to
+keep up) and after the fit has lost the person (much of the outline unexplained for lost_frames fits),
+from an initialisation (initialisation.py: the keypoints' triangulation turned into angles by paper
+004's method, bone lengths from the template scaled to the estimated height, the legs' length measured).
 Then six Nelder–Mead searches (Sec. 5.1, stage_search.py): torso, head and neck, left arm, right arm,
 left leg, right leg, each over its own parameters with the rest fixed, each minimising its own objective.
 Paper 000 Sec. 5.3 avoids local minima by good starts: each limb stage is searched from the previous
@@ -30,6 +30,7 @@ at a time is followed so, every probe_period frame sets, and taken when it expla
 better. Every tuning constant is a field of settings.FitterSettings.
 """
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -88,8 +89,11 @@ class SkeletonFitter:
     {length key (kinematics.LENGTH_FRACTIONS): [m]} when known beforehand, else None: measured at the
     first initialisation and on the upright frame sets after it (measure), afresh when time goes back."""
 
-    def __init__(self, settings=None, lengths=None):
+    def __init__(self, settings=None, lengths=None, threads=1):
         self.settings = settings or FitterSettings()
+        # The hypotheses' fits are independent of one another and spend most of their time in the compiled
+        # search, which releases the GIL: with threads > 1 they run side by side (the same results).
+        self.pool = ThreadPoolExecutor(threads, thread_name_prefix='hypotheses') if threads > 1 else None
         self.lengths = None if lengths is None else dict(lengths)
         # The person's measurements on upright frame sets (measure), while the lengths are not given.
         self.measurements = [] if lengths is None else None
@@ -114,10 +118,16 @@ class SkeletonFitter:
         """The 29 parameters of the last fit given out, or None before the first."""
         return None if self.given is None else self.given.parameters
 
-    def fit(self, stamp, views):
+    def fit(self, stamp, views, skipped=0):
+        """The Fit of the views (View) of the frame set at `stamp` [s]; `skipped`: frame sets passed over since
+        the last one (the node's, to keep up), which make a gap of any length no jump in time: the person was
+        there throughout, so the fit follows on (re-initialised only if it loses the person) rather than
+        start again; a start's comparison costs several fits, and on a slow machine a gap over time_jump after
+        each would make every fit a start."""
         started = time.perf_counter()
         settings = self.settings
-        jump = self.last_stamp is None or stamp < self.last_stamp or stamp - self.last_stamp > settings.time_jump
+        jump = (self.last_stamp is None or stamp < self.last_stamp
+                or (stamp - self.last_stamp > settings.time_jump and not skipped))
         if self.last_stamp is not None and stamp < self.last_stamp and self.measurements is not None:
             # Time went back: another recording (a bag played again, or someone else's), measured afresh,
             # so that the same bag gives the same skeletons; nor is its last pose this recording's.
@@ -133,10 +143,13 @@ class SkeletonFitter:
         if self.track is None or jump or self.lost_fits >= settings.lost_frames:
             self.start(stamp, views, found)
         else:
-            for track in [self.track] + self.rivals:
+            comparing = bool(self.rivals)
+
+            def follow(track):
                 self.follow(track, stamp, views, found)
-                if self.rivals:   # a comparison under way
+                if comparing:
                     track.cost += self.cost_of(track.parameters, track.joints, views)
+            self.each(follow, [self.track] + self.rivals)
             ankles = self.track.joints[[JOINT_INDEX['left_ankle'], JOINT_INDEX['right_ankle']]]
             apart = np.linalg.norm(ankles[0] - ankles[1]) >= settings.crossing_distance
             self.legs_passed |= not apart
@@ -172,8 +185,16 @@ class SkeletonFitter:
         self.track = Track(start, LimbTracks(self.settings))
         self.follow(self.track, stamp, views, found, canonical=True)
         self.track.cost = self.cost_of(self.track.parameters, self.track.joints, views)
-        self.rivals = [self.spawn(pairs, stamp, views, found) for _, pairs in START_LABELLINGS]
+        self.rivals = self.each(lambda pairs: self.spawn(pairs, stamp, views, found),
+                                [pairs for _, pairs in START_LABELLINGS])
         self.window, self.starting, self.lost_fits = self.settings.hypothesis_frames, True, 0
+
+    def each(self, function, items):
+        """[function(item) for item in items], on the thread pool if there is one (the calls must touch no
+        state but their own item's)."""
+        if self.pool is None or len(items) < 2:
+            return [function(item) for item in items]
+        return list(self.pool.map(function, items))
 
     def probe(self, stamp, views, found, labelling=None):
         """Follow `labelling` (hypotheses.RELABELLINGS; None: the next of hypotheses.PROBES) beside the fit,

@@ -44,8 +44,9 @@ class FitterSettings:
     max_evaluations_per_parameter: int = setting(
         150, "a stage's objective evaluations at most, per parameter it searches", 1, 100000)
     # Initialisation (fitting/initialisation.py; paper 000 Sec. 3.1 and 6, paper 004).
-    time_jump: float = setting(0.5, '[s] a larger gap between frame sets (or going back in time) re-initialises',
-                               0.01, 3600.0)
+    time_jump: float = setting(
+        0.5, '[s] a larger gap between frame sets (or going back in time) re-initialises, unless frame sets were '
+             'skipped in it to keep up (the fit then follows on)', 0.01, 3600.0)
     lost_share: float = setting(
         0.3, "a fit that leaves more than this share of the outline unexplained (median over the views; "
              "fitter.unexplained_share) has left the person", 0.0, 1.0)

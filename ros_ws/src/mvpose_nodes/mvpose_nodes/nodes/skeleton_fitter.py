@@ -51,7 +51,8 @@ class SkeletonFitterNode(MultiCameraNode):
         super().__init__('skeleton_fitter', FEATURES, SKELETON_FITTER)
         cv2.setNumThreads(1)
         warm_up()   # the compiled objective loaded (or compiled, the first time) before any frame set waits
-        self.fitting = FrameSetFitter(fitter_settings_from(self.values), self.cameras, self.clock)
+        self.fitting = FrameSetFitter(fitter_settings_from(self.values), self.cameras, self.clock,
+                                      threads=self.values['fit_threads'])
         self.skeleton_publisher = self.create_publisher(Skeleton, '/mvpose/skeleton', LATCHED)
         self.joint_state_publisher = self.create_publisher(JointState, '/mvpose/joint_states', 10)
         self.marker_publisher = self.create_publisher(MarkerArray, '/mvpose/skeleton_markers', 10)

@@ -47,10 +47,11 @@ class PreparedSet:
 class FrameSetFitter:
     """The skeleton fitter behind the node: `settings` (fitting.settings.FitterSettings), the configured
     camera numbers, the StageClock that counts the CPU of its stages ('conversion', 'distance maps',
-    'fit'), and the person's bone lengths if known (SkeletonFitter's `lengths`)."""
+    'fit'), the person's bone lengths if known (SkeletonFitter's `lengths`) and the threads that fit its
+    hypotheses (SkeletonFitter's `threads`)."""
 
-    def __init__(self, settings, cameras, clock=None, lengths=None):
-        self.fitter = SkeletonFitter(settings, lengths)
+    def __init__(self, settings, cameras, clock=None, lengths=None, threads=1):
+        self.fitter = SkeletonFitter(settings, lengths, threads)
         self.cameras = list(cameras)
         self.clock = clock or StageClock()
 
@@ -95,7 +96,7 @@ class FrameSetFitter:
                              joined(f'fewer than 2 cameras with a person at {stamp_ns} ns', skipped_text), views)
         try:
             with self.clock('fit'):
-                fit = self.fitter.fit(stamp_ns / 1e9, views)
+                fit = self.fitter.fit(stamp_ns / 1e9, views, skipped)
         except ValueError as error:
             return self.lost(stamp_ns, problems, 'fit', joined(f'no fit at {stamp_ns} ns: {error}', skipped_text), views)
         used = {v.camera.number for v in views}

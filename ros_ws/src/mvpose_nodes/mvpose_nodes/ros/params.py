@@ -228,7 +228,10 @@ SKELETON_FITTER = multi_camera_parameters(
               "as soon as a set is taken (the most sets fitted), 0 only once both are idle (the lowest latency "
               "when the cameras and the fitter share few cores), 1 while the last set is fitted "
               "(`./mvpose bench --rate 1.0` on 2 cores: 52 %, 42 % and 46-50 % of the sets fitted, 95th "
-              "percentile latency 310, 155 and 200 ms)", range=(0, 2), read_only=True),) + tuple(
+              "percentile latency 310, 155 and 200 ms)", range=(0, 2), read_only=True),
+    Parameter('fit_threads', 2, "threads that fit the body's labellings side by side while they are compared (a "
+              "start's eight, a probe's two; the same results as one): a start's first fit 458-802 -> 399-551 ms "
+              'on 2 cores (docs/method.md); 1: one after the other', range=(1, 64), read_only=True),) + tuple(
     Parameter(f.name, f.default, f.metadata['description'], range=f.metadata['range'], read_only=True)
     for f in SETTING_FIELDS)
 MARKER_SKELETON = multi_camera_parameters('marker tracks are fused in 3D (each needs a marker_tracker in /cam<K>)')
