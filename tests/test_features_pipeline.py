@@ -74,15 +74,15 @@ def test_pipeline_with_a_learned_background(studio_frame):
 
 
 def test_a_reduced_box_gives_the_full_images_features_in_its_pixels(cmu_walk):
-    # At 1080p the person's box is about 600 rows: the default person_rows (250) halves it (box_reduction),
-    # 0 keeps it whole.
+    # At 1080p the person's box is about 600 rows: person_rows 250 halves it (box_reduction), 0 (the default)
+    # keeps it whole.
     from mvpose_nodes.studio.scene import SKIN_BIT
     from mvpose_nodes.vision.features import box_reduction, contour_label_agreement
     assert [box_reduction(rows, 250) for rows in (249, 499, 500, 2000)] == [1, 1, 2, 2]
     assert box_reduction(2000, 0) == 1
     rgb, labels, camera, pose, _ = render_studio_frame(cmu_walk, size=(1920, 1080))
-    full = extractor(FeatureSettings(person_rows=0))(rgb)
-    reduced = extractor()(rgb)
+    full = extractor()(rgb)
+    reduced = extractor(FeatureSettings(person_rows=250))(rgb)
     check_against_truth(reduced, labels, camera, pose)
     assert reduced.silhouette.shape == full.silhouette.shape
     assert (reduced.silhouette & full.silhouette).sum() > 0.95 * (reduced.silhouette | full.silhouette).sum()

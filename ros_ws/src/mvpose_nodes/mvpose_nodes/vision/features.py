@@ -68,7 +68,7 @@ class FeatureSettings:
     skin_threshold: float = 1.0             # log-likelihood ratio L above which a pixel is skin
     skin_min_area_fraction: float = 0.00003  # smallest skin region, as a share of the image area
     sleeves: str = 'auto'                   # 'short', 'long' or 'auto' (from the regions' elongation)
-    person_rows: int = 250                  # [px] the box is reduced while the person keeps this many rows (0: never)
+    person_rows: int = 0                    # [px] the box is reduced while the person keeps this many rows (0: never)
 
 
 @dataclass
