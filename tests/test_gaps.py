@@ -70,7 +70,7 @@ def test_frame_sets_skipped_to_keep_up_are_no_jump_in_time(sparser_walk):
     """Gaps over time_jump in which the node skipped frame sets (a slow machine at 1x) are followed across;
     the same gaps with nothing skipped (a pause in the recording) start again."""
     for skipped, starts in ((LONG_GAP - 1, [True, False, False]), (0, [True, True, True])):
-        fitter, errors = SkeletonFitter(), []
+        fitter = SkeletonFitter()
         fits = [fitter.fit((4 + LONG_GAP * n) / 25.0, views, skipped=skipped * (n > 0))
                 for n, (_, views) in enumerate(sparser_walk)]
         assert [fit.initialised for fit in fits] == starts

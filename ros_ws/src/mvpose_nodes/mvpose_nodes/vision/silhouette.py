@@ -19,7 +19,7 @@ BLUENESS_THRESHOLD = 25   # [DN] b − max(r, g) above which a pixel is blue scr
 MIN_PERSON_AREA = 2000    # [px] at 1080p: smaller blobs are not a person (scaled with the image area)
 MAX_HOLE_FRACTION = 0.002  # holes up to this share of the person's area are keying misses, and filled
 OPENING_PX = 2            # [px] clean_mask's opening radius: keying noise
-CLOSING_PX = 4            # [px] clean_mask's closing radius: small gaps (as little as fills no gap between the legs)
+CLOSING_PX = 4            # [px] clean_mask's closing radius: small gaps, small enough not to join the legs
 # Anthropometric bands, as fractions of the silhouette height above its lowest pixel (person standing).
 LEG_CUT = 0.36            # legs are the silhouette below this height (below the hands, above the knees)
 ANKLE_HEIGHT = 0.03       # the ankle joint above the lowest pixel of its foot, as a share of the stature
