@@ -16,7 +16,7 @@ mvpose_msgs/Skeleton plus "root" (the silhouette centroid).
 
 Resolution: the person is found on a BOX_SCALE times smaller image, keyed in its box at full resolution,
 and, where the box has rows to spare (FeatureSettings.person_rows, box_reduction), everything after that
-runs on the box reduced by a whole factor; the features come back in the full image's pixels (_enlarged).
+runs on the box reduced by a whole factor; the features come back in the full image's pixels (_in_image).
 """
 import itertools
 import math
@@ -170,10 +170,10 @@ class FeatureExtractor:
         lap('silhouette keypoints')
         if points is None:
             return Features(False, silhouette, skin, keypoints={n: Keypoint() for n in KEYPOINT_NAMES}, timings=timings)
-        min_skin = max(10, int(s.skin_min_area_fraction * area))
-        skin_crop = detect_skin(self.skin_model, crop, s.skin_threshold, region=person, min_area=min_skin // r ** 2)
+        min_skin = max(10, int(s.skin_min_area_fraction * area)) // r ** 2   # [px of the reduced box]
+        skin_crop = detect_skin(self.skin_model, crop, s.skin_threshold, region=person, min_area=min_skin)
         skin[y0:y1, x0:x1] = enlarged_mask(skin_crop, r)
-        regions = skin_regions(skin_crop, min_area=min_skin // r ** 2)
+        regions = skin_regions(skin_crop, min_area=min_skin)
         lap('skin')
         ellipses, keypoints, hand_masks, frontness = self._interpret(regions, person, points, skin_crop, crop)
         lap('ellipses')
@@ -181,7 +181,7 @@ class FeatureExtractor:
                                 hand_masks)
         lap('contour')
         features = Features(True, silhouette, skin, ellipses, keypoints, contour, frontness, timings, other_people)
-        return _shifted(_enlarged(features, r), x0, y0)
+        return _in_image(features, r, (x0, y0))
 
     def _foreground(self, rgb, window):
         """Foreground pixels of `rgb`, which is the part `window` (row and column slices) of the image."""
@@ -343,7 +343,7 @@ def box_reduction(rows, person_rows):
 
 def enlarged_mask(mask, factor):
     """A (H, W) bool mask `factor` times larger, (factor·H, factor·W): bilinearly interpolated (pixel centres
-    aligned as in _enlarged) and cut at one half, so that its edges are not steps of `factor` pixels."""
+    aligned as in _in_image) and cut at one half, so that its edges are not steps of `factor` pixels."""
     if factor == 1:
         return mask
     height, width = mask.shape
@@ -351,46 +351,34 @@ def enlarged_mask(mask, factor):
                       interpolation=cv2.INTER_LINEAR) > 127
 
 
-def _enlarged(features, factor):
-    """Features computed on an image reduced `factor` times, in the pixels of the full image: a reduced
-    pixel (u, v) covers full pixels factor·u … factor·u + factor − 1, so its centre is factor·u + (factor −
-    1)/2 (keypoints, ellipse centres and ends; areas × factor²). The contour stays a chain of 8-neighbours:
-    each point is followed by factor − 1 points on the way to the next (its label and side repeated;
-    landmark indices × factor), its pixels the full pixels nearest those centres (factor·u + (factor − 1) // 2)."""
-    if factor == 1:
-        return features
+def _in_image(features, factor, origin):
+    """Features computed on a person's box reduced `factor` times (1: not reduced), in the full image's
+    pixels; origin: the box's top-left pixel (x0, y0). A reduced pixel (u, v) covers full pixels factor·u …
+    factor·u + factor − 1 of the box, so its centre is factor·u + (factor − 1)/2 (keypoints, ellipse
+    centres and ends; axes × factor, areas × factor²). The contour stays a chain of 8-neighbours: each
+    point is followed by factor − 1 points on the way to the next (its label and side repeated; landmark
+    indices × factor), its pixels the full pixels nearest those centres (factor·u + (factor − 1) // 2)."""
     centre = (factor - 1) / 2
+    x0, y0 = origin
+
+    def moved(x, y):
+        return factor * x + centre + x0, factor * y + centre + y0
     for keypoint in features.keypoints.values():
-        keypoint.x, keypoint.y = factor * keypoint.x + centre, factor * keypoint.y + centre
+        keypoint.x, keypoint.y = moved(keypoint.x, keypoint.y)
     for ellipse in features.ellipses:
-        ellipse.center = (factor * ellipse.center[0] + centre, factor * ellipse.center[1] + centre)
+        ellipse.center = moved(*ellipse.center)
         ellipse.semi_major, ellipse.semi_minor, ellipse.area = (factor * ellipse.semi_major, factor * ellipse.semi_minor,
                                                                factor ** 2 * ellipse.area)
         for end in (ellipse.end_a, ellipse.end_b):
-            end.x, end.y = factor * end.x + centre, factor * end.y + centre
+            end.x, end.y = moved(end.x, end.y)
     contour = features.contour
     if contour is not None and len(contour.points):
         points = factor * contour.points.astype(np.int64) + (factor - 1) // 2
         steps = np.roll(points, -1, axis=0) - points   # to the next point (the contour is closed)
-        chain = points[:, None] + steps[:, None] * np.arange(factor)[None, :, None] // factor
+        chain = points[:, None] + steps[:, None] * np.arange(factor)[None, :, None] // factor + (x0, y0)
         features.contour = ContourLabels(chain.reshape(-1, 2).astype(np.int32), np.repeat(contour.labels, factor),
                                          np.repeat(contour.sides, factor),
                                          {name: factor * index for name, index in contour.landmarks.items()})
-    return features
-
-
-def _shifted(features, dx, dy):
-    """Features computed in a box whose top-left pixel is (dx, dy), moved to image coordinates."""
-    for keypoint in features.keypoints.values():
-        keypoint.x += dx
-        keypoint.y += dy
-    for ellipse in features.ellipses:
-        ellipse.center = (ellipse.center[0] + dx, ellipse.center[1] + dy)
-        for end in (ellipse.end_a, ellipse.end_b):
-            end.x += dx
-            end.y += dy
-    if features.contour is not None and len(features.contour.points):
-        features.contour.points = features.contour.points + np.array([dx, dy], dtype=features.contour.points.dtype)
     return features
 
 
