@@ -174,11 +174,13 @@ class SilhouetteKeypoints:
 def silhouette_keypoints(mask):
     """Root (centroid of all foreground pixels), the head's top and the shoulders' row (head_column), and per
     leg the ankle and knee (paper 000 Sec. 3.1)."""
-    rows, columns = np.nonzero(mask)
-    if rows.size == 0:
+    per_row, per_column = np.count_nonzero(mask, axis=1), np.count_nonzero(mask, axis=0)
+    count = int(per_row.sum())
+    if count == 0:
         return None
-    bottom_row = rows.max()
-    root = (float(columns.mean()), float(rows.mean()))
+    bottom_row = int(np.flatnonzero(per_row)[-1])
+    # The pixels' mean row and column: exact integer sums, divided once (as np.mean of their coordinates gives).
+    root = (int(per_column @ np.arange(mask.shape[1])) / count, int(per_row @ np.arange(mask.shape[0])) / count)
     top, shoulders = head_column(mask, root, bottom_row)
     height = float(bottom_row - top[1] + 1)
     legs = _legs(mask, bottom_row, height)
@@ -203,24 +205,20 @@ def head_column(mask, root, bottom=None):
     left, right = x, x + 1
     middle = x + 0.5   # of the trunk: the last run not much wider than the runs so far (not an arm held out)
     runs, widths = [], []   # (row, first column, last column + 1) on the coarse grid, from the centroid up; widths sorted
+    row_runs = foreground_runs(coarse[:row + 1])
     for row in range(row, -1, -1):
-        line = np.concatenate([[False], coarse[row], [False]])
-        edges = np.flatnonzero(line[1:] != line[:-1])
-        starts, ends = edges[0::2], edges[1::2]
-        overlapping = (starts < right) & (ends > left)
-        if not overlapping.any():
+        overlapping = [(start, end) for start, end in row_runs[row] if start < right and end > left]
+        if not overlapping:
             break
-        candidates = np.flatnonzero(overlapping)
-        if (ends - starts)[candidates].max() > 1:   # a sliver of one coarse cell beside a wider run: keying noise
-            candidates = candidates[(ends - starts)[candidates] > 1]
-        chosen = candidates[np.argmin(np.abs(0.5 * (starts[candidates] + ends[candidates]) - middle))]
-        left, right = starts[chosen], ends[chosen]
+        if max(end - start for start, end in overlapping) > 1:   # a sliver of one coarse cell beside a wider
+            overlapping = [(start, end) for start, end in overlapping if end - start > 1]   # run: keying noise
+        left, right = min(overlapping, key=lambda run: abs(0.5 * (run[0] + run[1]) - middle))
         runs.append((row, left, right))
         bisect.insort(widths, right - left)
         count = len(widths)   # their median, as np.median gives it (without its overhead in this loop)
         median = widths[count // 2] if count % 2 else 0.5 * (widths[count // 2 - 1] + widths[count // 2])
         if right - left <= TRUNK_WIDENING * median:   # a cell a row at most: a lean of 45° (an arm
-            middle += np.clip(0.5 * (left + right) - middle, -1.0, 1.0)   # touching the head jumps further)
+            middle += min(max(0.5 * (left + right) - middle, -1.0), 1.0)   # touching the head jumps further)
     if not runs:
         rows, columns = np.nonzero(mask)
         top_row = rows.min()
@@ -248,71 +246,83 @@ def head_column(mask, root, bottom=None):
     return top, (float(0.5 * (left + right) * HEAD_SCAN_SCALE), float(row * HEAD_SCAN_SCALE))
 
 
-def _band_centroid(mask, bottom_row, height, band, column_range=None):
-    """Centroid (x, y) of the mask pixels between band[0] and band[1] × height above bottom_row."""
-    low = int(round(bottom_row - band[1] * height))
+def foreground_runs(mask):
+    """Per row of a bool (H, W) mask, its runs of foreground, left to right: [[(first column, last column
+    + 1), ...], ...] in Python ints (found for all rows at once: head_column's row-by-row walk then costs
+    no NumPy call per row)."""
+    padded = np.zeros((mask.shape[0], mask.shape[1] + 2), bool)
+    padded[:, 1:-1] = mask
+    rows, columns = np.nonzero(padded[:, 1:] != padded[:, :-1])   # row-major: a row's edges in pairs
+    runs = [[] for _ in range(mask.shape[0])]
+    for row, start, end in zip(rows[0::2].tolist(), columns[0::2].tolist(), columns[1::2].tolist()):
+        runs[row].append((start, end))
+    return runs
+
+
+def _band_centroid(leg, first_row, bottom_row, height, band):
+    """Centroid (x, y) of a leg's pixels between band[0] and band[1] × height above bottom_row; `leg`: the
+    silhouette's rows from first_row on (bool (R, W)), none above them."""
+    low = max(int(round(bottom_row - band[1] * height)), 0)
     high = int(round(bottom_row - band[0] * height)) + 1
-    region = mask[max(low, 0):high]
-    if column_range is not None:
-        region = region[:, column_range[0]:column_range[1]]
-    rows, columns = np.nonzero(region)
+    rows, columns = np.nonzero(leg[max(low - first_row, 0):max(high - first_row, 0)])
     if rows.size == 0:
         return None
-    offset = column_range[0] if column_range is not None else 0
-    return float(columns.mean() + offset), float(rows.mean() + max(low, 0))
+    # Rows counted from `low` (not from the leg's first row) before their mean: the same floats as ever.
+    return float(columns.mean()), float((rows + max(first_row - low, 0)).mean() + low)
 
 
 def _legs(mask, bottom_row, height):
     """The legs: connected parts of the silhouette below LEG_CUT; when both feet merge into one
-    part (legs crossing or together), that part is split at its median column."""
+    part (legs crossing or together), that part is split at its median column. Worked on in the rows
+    below the cut only."""
     cut = int(round(bottom_row - LEG_CUT * height))
-    below = mask[cut:bottom_row + 1].astype(np.uint8)
-    labels, areas = components(below)
+    below = mask[cut:bottom_row + 1]
+    labels, areas = components(below.astype(np.uint8))
     parts = sorted(range(1, len(areas)), key=lambda i: -areas[i])[:2]
     parts = [p for p in parts if areas[p] > 0.1 * areas[parts[0]]]
     legs = []
     if len(parts) == 2:
         for part in parts:
-            leg = np.zeros_like(mask)
-            leg[cut:bottom_row + 1] = labels == part
-            leg_rows = np.nonzero(leg.any(axis=1))[0]
-            legs.append(_leg(leg, leg_rows.max(), bottom_row, height, confidence=0.9))
+            leg = labels == part
+            legs.append(_leg(leg, cut, cut + np.flatnonzero(leg.any(axis=1))[-1], bottom_row, height, confidence=0.9))
     elif len(parts) == 1:
-        part_mask = np.zeros_like(mask)
-        part_mask[cut:bottom_row + 1] = labels == parts[0]
+        part_mask = labels == parts[0]
         split = int(np.median(np.nonzero(part_mask)[1]))
         for columns, confidence in (((0, split), 0.5), ((split, mask.shape[1]), 0.5)):
-            leg = np.zeros_like(mask)
+            leg = np.zeros_like(part_mask)
             leg[:, columns[0]:columns[1]] = part_mask[:, columns[0]:columns[1]]
-            leg_rows = np.nonzero(leg.any(axis=1))[0]
+            leg_rows = np.flatnonzero(leg.any(axis=1))
             if leg_rows.size:
-                legs.append(_leg(leg, leg_rows.max(), bottom_row, height, confidence))
+                legs.append(_leg(leg, cut, cut + leg_rows[-1], bottom_row, height, confidence))
     legs = [leg for leg in legs if leg['ankle'] is not None]
     return sorted(legs, key=lambda leg: leg['ankle'][0])
 
 
-def _leg(leg_mask, leg_bottom, bottom_row, height, confidence):
+def _leg(leg, first_row, leg_bottom, bottom_row, height, confidence):
     """Ankle: the shin's axis (principal axis of the leg's pixels in SHIN_BAND above its lowest pixel)
     followed down to where it leaves the leg (the sole, or the heel of a foot that points down at
     toe-off), then ANKLE_HEIGHT of the stature back up it. A centroid of the foot would be pulled
     towards the toes. Knee: above the floor contact (the lowest pixel of the whole silhouette),
-    where both knees stay while walking."""
-    low = max(int(round(leg_bottom - SHIN_BAND[1] * height)), 0)
+    where both knees stay while walking. `leg`: bool (R, W), the leg's pixels in the silhouette's rows
+    from first_row on; leg_bottom, bottom_row: rows [px] of the whole image."""
+    low = max(int(round(leg_bottom - SHIN_BAND[1] * height)), first_row)
     high = int(round(leg_bottom - SHIN_BAND[0] * height)) + 1
-    rows, columns = np.nonzero(leg_mask[low:high])
+    rows, columns = np.nonzero(leg[low - first_row:max(high - first_row, 0)])
     ankle = None
     if rows.size >= 10:
         points = np.column_stack([columns, rows + low]).astype(float)
         center = points.mean(axis=0)
         _, _, axes = np.linalg.svd(points - center, full_matrices=False)
         down = axes[0] if axes[0][1] > 0 else -axes[0]
-        exit_point = center
+        # Walked in Python floats (the same float64 arithmetic, without NumPy's overhead per step).
+        (x, y), (dx, dy) = center.tolist(), down.tolist()
+        rows_held, width = leg.shape
         for _ in range(int(height)):
-            ahead = exit_point + down
-            column, row = int(round(ahead[0])), int(round(ahead[1]))
-            if not (0 <= row < leg_mask.shape[0] and 0 <= column < leg_mask.shape[1] and leg_mask[row, column]):
+            column, row = int(round(x + dx)), int(round(y + dy)) - first_row
+            if not (0 <= row < rows_held and 0 <= column < width and leg[row, column]):
                 break
-            exit_point = ahead
-        ankle = tuple(map(float, exit_point - ANKLE_HEIGHT * height * down))
-    return {'ankle': ankle, 'knee': _band_centroid(leg_mask, bottom_row, height, KNEE_BAND),
+            x, y = x + dx, y + dy
+        reach = ANKLE_HEIGHT * height
+        ankle = (x - reach * dx, y - reach * dy)
+    return {'ankle': ankle, 'knee': _band_centroid(leg, first_row, bottom_row, height, KNEE_BAND),
             'confidence': confidence}
