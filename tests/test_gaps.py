@@ -50,7 +50,8 @@ def test_without_the_gaps_handled_the_fit_falls_behind(sparse_walk):
 
 
 def test_the_hypotheses_fitted_side_by_side_give_the_same_fits(sparse_walk):
-    # A start's eight labellings and their comparison over the next fits, on two threads and on one.
+    # A start's eight labellings and their comparison over the next fits, and each stage's searches from its
+    # several starts, on two threads and on one.
     fits = {threads: SkeletonFitter(threads=threads) for threads in (1, 2)}
     for index, (_, views) in zip(FITTED, sparse_walk):
         one, two = (fits[threads].fit(index / 25.0, views) for threads in (1, 2))

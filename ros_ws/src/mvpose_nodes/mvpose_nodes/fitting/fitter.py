@@ -29,6 +29,7 @@ hypothesis_prune), and the one whose fits explain the views best is kept; after 
 at a time is followed so, every probe_period frame sets, and taken when it explains the views clearly
 better. Every tuning constant is a field of settings.FitterSettings.
 """
+import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
@@ -92,8 +93,11 @@ class SkeletonFitter:
     def __init__(self, settings=None, lengths=None, threads=1):
         self.settings = settings or FitterSettings()
         # The hypotheses' fits are independent of one another and spend most of their time in the compiled
-        # search, which releases the GIL: with threads > 1 they run side by side (the same results).
-        self.pool = ThreadPoolExecutor(threads, thread_name_prefix='hypotheses') if threads > 1 else None
+        # search, which releases the GIL: with threads > 1 they run side by side (the same results); so do a
+        # stage's searches from its several starts while one hypothesis is fitted (search_stages).
+        self.local = threading.local()   # .worker: this thread is one of the pool's
+        self.pool = ThreadPoolExecutor(threads, thread_name_prefix='hypotheses',
+                                       initializer=lambda: setattr(self.local, 'worker', True)) if threads > 1 else None
         self.lengths = None if lengths is None else dict(lengths)
         # The person's measurements on upright frame sets (measure), while the lengths are not given.
         self.measurements = [] if lengths is None else None
@@ -190,9 +194,10 @@ class SkeletonFitter:
         self.window, self.starting, self.lost_fits = self.settings.hypothesis_frames, True, 0
 
     def each(self, function, items):
-        """[function(item) for item in items], on the thread pool if there is one (the calls must touch no
-        state but their own item's)."""
-        if self.pool is None or len(items) < 2:
+        """[function(item) for item in items], on the thread pool if there is one and this is not one of its
+        threads (which would wait for work queued behind its own; the calls must touch no state but their own
+        item's)."""
+        if self.pool is None or len(items) < 2 or getattr(self.local, 'worker', False):
             return [function(item) for item in items]
         return list(self.pool.map(function, items))
 
@@ -308,18 +313,21 @@ class SkeletonFitter:
         results = []
         for stage in STAGE_NAMES:
             assigned = self.stages.outline_assignment(stage, parameters, oriented)
-            searched, result = self.stages.search(stage, parameters, oriented, assigned, frame)
-            if stage != 'torso' and (found is not None or canonical):
+            if stage == 'torso' or (found is None and not canonical):
+                searched, result = self.stages.search(stage, parameters, oriented, assigned, frame)
+            else:
                 if alternatives is None:   # starts relative to the fitted torso
                     alternatives = self.alternative_starts(parameters, found, canonical, last)
-                outcomes = [(searched, result)]
-                for start in alternatives[stage]:
+                def search_from(start):
+                    if start is None:
+                        return self.stages.search(stage, parameters, oriented, assigned, frame)
                     alternative = parameters.copy()
                     alternative[stage_indices(stage)] = start[stage_indices(stage)]
                     # From a canonical start the outline is assigned from that pose: a raised arm's outline
                     # is nobody's in a pose with the arm down, and nothing would pull the arm up to it.
                     own = self.stages.outline_assignment(stage, alternative, oriented) if afresh else assigned
-                    outcomes.append(self.stages.search(stage, alternative, oriented, own, frame))
+                    return self.stages.search(stage, alternative, oriented, own, frame)
+                outcomes = self.each(search_from, [None] + alternatives[stage])
                 def rank(outcome):   # searches with their own outline assignments: one footing
                     return self.stages.explained_cost(stage, outcome[0], oriented, frame) if afresh \
                         else outcome[1].cost

@@ -230,8 +230,9 @@ SKELETON_FITTER = multi_camera_parameters(
               "(`./mvpose bench --rate 1.0` on 2 cores: 52 %, 42 % and 46-50 % of the sets fitted, 95th "
               "percentile latency 310, 155 and 200 ms)", range=(0, 2), read_only=True),
     Parameter('fit_threads', 2, "threads that fit the body's labellings side by side while they are compared (a "
-              "start's eight, a probe's two; the same results as one): a start's first fit 458-802 -> 399-551 ms "
-              'on 2 cores (docs/method.md); 1: one after the other', range=(1, 64), read_only=True),) + tuple(
+              "start's eight, a probe's two), and otherwise a stage's searches from its several starts (the same "
+              "results as one): on 2 cores the default bag's fits offline 2150 -> 1800 ms, a start's first fit "
+              '370 -> 290 ms (docs/method.md); 1: one after the other', range=(1, 64), read_only=True),) + tuple(
     Parameter(f.name, f.default, f.metadata['description'], range=f.metadata['range'], read_only=True)
     for f in SETTING_FIELDS)
 MARKER_SKELETON = multi_camera_parameters('marker tracks are fused in 3D (each needs a marker_tracker in /cam<K>)')
