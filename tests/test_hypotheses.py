@@ -68,6 +68,29 @@ def test_every_labelling_is_tried_at_a_start():
     assert relabelled_joints(None, ('knee',)) is None
 
 
+def test_a_labelling_fits_afresh_only_the_stages_whose_pairs_it_exchanges(walk):
+    """The legs or arms exchanged keep this frame's fit of the other stages (the same joints, the same
+    evidence) and fit their limbs again; the body turned round (hips and shoulders exchanged) fits every stage."""
+    from mvpose_nodes.body.model import STAGE_NAMES
+    from mvpose_nodes.fitting.hypotheses import relabelled_stages
+    from mvpose_nodes.fitting.stage_search import stage_indices
+    assert relabelled_stages(RELABELLINGS['legs exchanged']) == {'left_leg', 'right_leg'}
+    assert relabelled_stages(RELABELLINGS['arms exchanged']) == {'left_arm', 'right_arm'}
+    assert relabelled_stages(combined(['legs exchanged', 'arms exchanged'])) == set(STAGE_NAMES) - {'torso', 'head_neck'}
+    assert relabelled_stages(RELABELLINGS['turned round']) == relabelled_stages(('hip',)) == set(STAGE_NAMES)
+    fitter = SkeletonFitter()
+    _, views = walk[0]
+    fitter.fit(0.0, views)
+    found, track = fitter.last_found, fitter.track
+    for labelling in ('legs exchanged', 'arms exchanged', 'turned round'):
+        pairs = RELABELLINGS[labelling]
+        rival = fitter.spawn(pairs, 0.0, views, found)
+        for stage, mine, theirs in zip(STAGE_NAMES, rival.results, track.results):
+            indices = stage_indices(stage)
+            kept = np.array_equal(rival.parameters[indices], track.parameters[indices]) and mine is theirs
+            assert kept == (stage not in relabelled_stages(pairs)), (labelling, stage)
+
+
 def swapped_after_wrong_start(frames, pairs, monkeypatch, settings=None):
     """Fit the frames from a start whose triangulated pairs are labelled with `pairs` exchanged (as a start
     without a face to tell gets them): whether the start's own fit has any left/right pair nearer the other

@@ -41,7 +41,7 @@ from mvpose_nodes.body.kinematics import BONES, bone_lengths, forward_kinematics
 from mvpose_nodes.body.model import JOINT_INDEX, LABEL_TORSO, STAGE_NAMES
 from mvpose_nodes.fitting.compiled import MAP_LABELS, nearest_capsules, pack_frame
 from mvpose_nodes.fitting.hypotheses import (PROBES, RELABELLINGS, START_LABELLINGS, Track, feet_outside,
-                                             relabelled_joints)
+                                             relabelled_joints, relabelled_stages)
 from mvpose_nodes.fitting.initialisation import (completed_joints, consistent_views, facing_right, labelled_joints,
                                                  person_lengths, stature, triangulated_joints, upright)
 from mvpose_nodes.fitting.limb_sides import LimbTracks, exchanged_pairs, oriented_view
@@ -217,7 +217,12 @@ class SkeletonFitter:
         rival = self.track.relabelled(pairs)
         rival.limbs.history = rival.limbs.history[:-1]   # this frame's fit, to be replaced by the rival's own
         start = inverse_kinematics(exchanged_pairs(self.track.joints, pairs))
-        rival.parameters, rival.results = self.search_stages(start, views, relabelled_joints(found, pairs))
+        # The stages whose pairs stay as they were keep this frame's fit: the same joints, the same evidence.
+        searched = relabelled_stages(pairs)
+        kept = {stage: result for stage, result in zip(STAGE_NAMES, self.track.results) if stage not in searched}
+        for stage in kept:
+            start[stage_indices(stage)] = self.track.parameters[stage_indices(stage)]
+        rival.parameters, rival.results = self.search_stages(start, views, relabelled_joints(found, pairs), kept=kept)
         rival.joints, _ = forward_kinematics(rival.parameters, self.lengths)
         rival.limbs.append(stamp, rival.joints)
         rival.cost = self.cost_of(rival.parameters, rival.joints, views)
@@ -294,13 +299,14 @@ class SkeletonFitter:
                                                              self.settings.ankle_height)
         return cost
 
-    def search_stages(self, parameters, views, found, canonical=False, last=None, stale=False):
+    def search_stages(self, parameters, views, found, canonical=False, last=None, stale=False, kept=None):
         """The six stages of paper 000 Sec. 5.1 from `parameters` (29,); each stage after the torso's searched
         also from the frame's triangulated joints `found` ({joint: (3,)} or None) and, with `canonical` (a
         start), each limb stage from the canonical limb poses (limb_starts.py), the best result kept (Sec.
         5.3). `last`: the last fit's parameters when `parameters` are already the triangulated limbs (a gap
-        over velocity_horizon); `stale`: the last fit is over outline_horizon old. Returns the fitted
-        parameters and the stage_search.StageResults."""
+        over velocity_horizon); `stale`: the last fit is over outline_horizon old; `kept`: {stage: StageResult}
+        of stages not searched, `parameters` already their fit. Returns the fitted parameters and the
+        stage_search.StageResults."""
         reference, _ = forward_kinematics(parameters, self.lengths)
         if found is not None:
             for name, position in found.items():
@@ -312,6 +318,9 @@ class SkeletonFitter:
         frame = pack_frame(oriented)
         results = []
         for stage in STAGE_NAMES:
+            if kept and stage in kept:
+                results.append(kept[stage])
+                continue
             assigned = self.stages.outline_assignment(stage, parameters, oriented)
             if stage == 'torso' or (found is None and not canonical):
                 searched, result = self.stages.search(stage, parameters, oriented, assigned, frame)

@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from mvpose_nodes.body.model import JOINT_INDEX, torso_frame
+from mvpose_nodes.body.model import JOINT_INDEX, STAGE_NAMES, torso_frame
 from mvpose_nodes.fitting.limb_sides import LimbTracks, exchange, exchanged_pairs
 from mvpose_nodes.fitting.objective import outside_distances
 
@@ -47,6 +47,11 @@ RELABELLINGS = {
     'arms exchanged': ('elbow', 'wrist'),
 }
 PROBES = tuple(RELABELLINGS)   # the labellings probed in turn while tracking
+# The stages (stage_search.STAGE_PARAMETERS) whose parameters place the joints of each pair: a labelling that
+# exchanges none of a stage's pairs leaves that stage's fit as it was (SkeletonFitter.spawn keeps it).
+PAIR_STAGES = {'hip': ('torso', 'left_leg', 'right_leg'), 'shoulder': ('torso', 'left_arm', 'right_arm'),
+               'knee': ('left_leg', 'right_leg'), 'ankle': ('left_leg', 'right_leg'),
+               'elbow': ('left_arm', 'right_arm'), 'wrist': ('left_arm', 'right_arm')}
 
 
 def combined(names):
@@ -81,6 +86,13 @@ class Track:
         limbs = LimbTracks(self.limbs.settings)
         limbs.history = [(stamp, exchanged_pairs(joints, pairs)) for stamp, joints in self.limbs.history]
         return Track(self.parameters.copy(), limbs)
+
+
+def relabelled_stages(pairs):
+    """The stage names a labelling that exchanges `pairs` has to fit afresh: with the hips or shoulders (the
+    torso turned round) every stage, else the limbs whose pairs it exchanges (PAIR_STAGES)."""
+    stages = {stage for pair in pairs for stage in PAIR_STAGES[pair]}
+    return set(STAGE_NAMES) if 'torso' in stages else stages
 
 
 def relabelled_joints(found, pairs):
