@@ -252,7 +252,9 @@ def run_bench(bag, window, rate, limit, log_path, total=None, sample_every=None,
             for topic, publisher in calibration_publishers.items():
                 publisher.publish(calibration[topic])
             wait_for_acknowledgements(calibration_publishers.values(), timeout_sec=5.0)
-            cpu_before = newest_diagnostics(time.monotonic(), 'before the run')
+            # Any status from after the graph connected will do (the nodes idle until the first images): waiting
+            # for one from now on would hold the first images back by up to a status period (1 s).
+            cpu_before = newest_diagnostics(result.connected, 'before the run')
             before = {name: sample_process(pid) for name, pid in pids.items()}
             started = time.monotonic()
             progress = Progress(len(frame_sets), 'bench', unit='frame sets')
