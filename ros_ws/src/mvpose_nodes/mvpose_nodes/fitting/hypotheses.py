@@ -17,7 +17,9 @@ and their combinations) are each tracked for hypothesis_frames frame sets and th
 least over them is kept; later, every probe_period frame sets one other labelling at a time (PROBES, in
 turn) is tracked beside the fit for as long, and taken if its fits cost hypothesis_margin less, and the
 legs exchanged after each stride (the fit's ankles nearer than crossing_distance, then apart). After every
-frame set, tracks whose fits cost hypothesis_prune more than the cheapest's are dropped. A track's
+frame set, tracks whose fits cost hypothesis_prune more than the cheapest's are dropped. A labelling's
+first fit searches only the stages whose pairs it exchanges (relabelled_stages): the legs or the arms
+exchanged keep the fit's torso, head and other limbs, the body turned round searches them all. A track's
 cost is its fits' objective with the outline assigned from the fitted pose (SkeletonFitter.cost_of), not
 the searches' own costs, whose assignments were made from where each search started. Pure NumPy.
 """
