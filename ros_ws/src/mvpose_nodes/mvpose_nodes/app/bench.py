@@ -252,9 +252,11 @@ def run_bench(bag, window, rate, limit, log_path, total=None, sample_every=None,
             for topic, publisher in calibration_publishers.items():
                 publisher.publish(calibration[topic])
             wait_for_acknowledgements(calibration_publishers.values(), timeout_sec=5.0)
-            # Any status from after the graph connected will do (the nodes idle until the first images): waiting
-            # for one from now on would hold the first images back by up to a status period (1 s).
-            cpu_before = newest_diagnostics(result.connected, 'before the run')
+            # The statuses that showed the graph connected will do: a node publishes them from its executor, after
+            # its start-up, and idles from then until the first images (a few ms of DDS at most, counted in the
+            # run). Waiting for newer ones held the first images back by a status period (1 s) and put that
+            # wait in the start-up figure.
+            cpu_before = newest_diagnostics(result.launched, 'before the run')
             before = {name: sample_process(pid) for name, pid in pids.items()}
             started = time.monotonic()
             progress = Progress(len(frame_sets), 'bench', unit='frame sets')
