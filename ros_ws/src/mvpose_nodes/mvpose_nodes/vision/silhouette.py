@@ -303,8 +303,8 @@ def _leg(leg, first_row, leg_bottom, bottom_row, height, confidence):
     followed down to where it leaves the leg (the sole, or the heel of a foot that points down at
     toe-off), then ANKLE_HEIGHT of the stature back up it. A centroid of the foot would be pulled
     towards the toes. Knee: above the floor contact (the lowest pixel of the whole silhouette),
-    where both knees stay while walking. `leg`: bool (R, W), the leg's pixels in the silhouette's rows
-    from first_row on; leg_bottom, bottom_row: rows [px] of the whole image."""
+    where both knees stay while walking. `leg`: bool (R, W), the leg's pixels in the silhouette mask's
+    rows from first_row on; leg_bottom, bottom_row: rows [px] of the whole mask."""
     low = max(int(round(leg_bottom - SHIN_BAND[1] * height)), first_row)
     high = int(round(leg_bottom - SHIN_BAND[0] * height)) + 1
     rows, columns = np.nonzero(leg[low - first_row:max(high - first_row, 0)])
