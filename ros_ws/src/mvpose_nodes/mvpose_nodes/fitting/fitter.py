@@ -289,8 +289,9 @@ class SkeletonFitter:
         (hypotheses.feet_outside)."""
         oriented = [oriented_view(view, joints) for view in views]
         frame = pack_frame(oriented)
-        nearest = self.stages.outline_nearest(parameters, oriented)
-        cost = sum(self.stages.posed_cost(stage, parameters, oriented, frame, nearest) for stage in STAGE_NAMES)
+        posed, frames = forward_kinematics(parameters, self.stages.lengths)
+        nearest = self.stages.outline_nearest(parameters, oriented, posed)
+        cost = sum(self.stages.posed_cost(stage, parameters, oriented, frame, nearest, frames) for stage in STAGE_NAMES)
         hips = joints[JOINT_INDEX['right_hip']] - joints[JOINT_INDEX['left_hip']]
         if self.face_right is not None and np.dot(hips, self.face_right) < 0:
             cost *= 1 + self.settings.face_cost_share

@@ -258,11 +258,12 @@ class StageSearch:
         return [None if view.outline is None else view.outline.points[mine[capsule] & within]
                 for view, (capsule, within) in zip(views, nearest)]
 
-    def outline_nearest(self, parameters, views):
+    def outline_nearest(self, parameters, views, joints=None):
         """Per view, for each outline point, the index (into BONES) of the capsule nearest to it in the pose
         `parameters` (29,) and whether it lies within outline_gate of it: (N,) int, (N,) bool ((None, None)
-        for a view without an outline)."""
-        joints, _ = forward_kinematics(parameters, self.lengths)
+        for a view without an outline). joints: the pose's forward_kinematics joints, if the caller has them."""
+        if joints is None:
+            joints, _ = forward_kinematics(parameters, self.lengths)
         nearest = []
         for view in views:
             if view.outline is None:
@@ -281,27 +282,33 @@ class StageSearch:
         leaves a raised arm's outline unexplained costs more than the raised arm explaining it; within one
         assignment (the stage's own objective) such points are left out and cost nothing."""
         settings = self.settings
-        nearest = self.outline_nearest(parameters, views)
+        joints, frames = forward_kinematics(parameters, self.lengths)
+        nearest = self.outline_nearest(parameters, views, joints)
         unexplained = sum(int(np.count_nonzero(~within)) for _, within in nearest if within is not None)
         capped = settings.outline_weight * OUTLINE_STEP * cauchy_loss(settings.outline_gate, settings.outline_scale)
-        return self.posed_cost(stage, parameters, views, frame, nearest) + capped * unexplained
+        return self.posed_cost(stage, parameters, views, frame, nearest, frames) + capped * unexplained
 
-    def posed_cost(self, stage, parameters, views, frame, nearest):
+    def posed_cost(self, stage, parameters, views, frame, nearest, frames=None):
         """The stage's objective at the pose `parameters` (29,) with the outline assigned from that pose
-        (`nearest`: its outline_nearest), without the smoothness prior, plus its joint limits."""
+        (`nearest`: its outline_nearest), without the smoothness prior, plus its joint limits (frames: the
+        pose's forward_kinematics bone frames, if the caller has them)."""
         assigned = self.outline_assignment(stage, parameters, views, nearest)
-        return self.compiled_cost(stage, parameters, views, assigned, frame)[0] + self.limit_cost(stage, parameters)
+        return (self.compiled_cost(stage, parameters, views, assigned, frame)[0]
+                + self.limit_cost(stage, parameters, frames))
 
-    def limit_cost(self, stage, parameters):
+    def limit_cost(self, stage, parameters, frames=None):
         """The stage's joint limits at `parameters` (29,): limit_weight × the squared excess [rad²] of its
         parameters beyond JOINT_LIMITS and of its limb's twist beyond TWIST_LIMITS (twist_excess), as the
-        search's prior adds them (the reference of compiled.stage_objective's limit term)."""
+        search's prior adds them (the reference of compiled.stage_objective's limit term). frames: the
+        pose's forward_kinematics bone frames, if the caller has them."""
         excess = 0.0
         for name, index in zip(STAGE_PARAMETERS[stage], stage_indices(stage)):
             low, high = JOINT_LIMITS.get(name, (-np.inf, np.inf))
             excess += (max(low - parameters[index], 0.0) + max(parameters[index] - high, 0.0)) ** 2
         if stage in TWIST_LIMITS:
-            excess += twist_excess(stage, forward_kinematics(parameters, self.lengths)[1], parameters)
+            if frames is None:
+                frames = forward_kinematics(parameters, self.lengths)[1]
+            excess += twist_excess(stage, frames, parameters)
         return self.settings.limit_weight * excess
 
     def stage_cost(self, stage, parameters, views, assigned=None):
