@@ -91,6 +91,40 @@ def test_a_labelling_fits_afresh_only_the_stages_whose_pairs_it_exchanges(walk):
             assert kept == (stage not in relabelled_stages(pairs)), (labelling, stage)
 
 
+def torso_yaw_error(joints, truth):
+    """How far [deg] the torso of joints (15, 3) faces from that of truth, front and back alike (0-90: the
+    hypotheses decide between a pose and the pose turned round)."""
+    from mvpose_nodes.body.kinematics import torso_rotation
+    forward, true_forward = torso_rotation(joints)[:2, 1], torso_rotation(truth)[:2, 1]
+    cosine = np.dot(forward, true_forward) / np.linalg.norm(forward) / np.linalg.norm(true_forward)
+    return math.degrees(math.acos(min(abs(cosine), 1.0)))
+
+
+@pytest.mark.parametrize('searched', [True, False])
+def test_a_start_turned_far_off_the_keypoints_yaw_finds_the_torso(walk, monkeypatch, searched):
+    """A start whose pose from the keypoints faces 80 degrees off (as the limbs' offsets give it for a walker
+    mid-stride) fits the torso within 10 degrees of the truth's facing (or of its back: the hypotheses tell
+    those apart), its torso searched also from the pose turned by ±45 and ±90 degrees; searched only from
+    the keypoints' pose, it stays over 25 degrees off (36 and 55 here), so the check can fail."""
+    from mvpose_nodes.body.kinematics import inverse_kinematics
+    if not searched:
+        monkeypatch.setattr(fitter_module, 'TORSO_START_YAWS', ())
+    for truth, views in (walk[0], walk[4]):
+        turned = inverse_kinematics(truth)
+        turned[fitter_module.TORSO_YAW] += math.radians(80)
+        monkeypatch.setattr(SkeletonFitter, 'initial_parameters', lambda self, views, found: turned.copy())
+        fitter = SkeletonFitter(lengths=bone_lengths_of_walk(walk))
+        fitter.fit(0.0, views)
+        error = torso_yaw_error(fitter.track.joints, truth)   # the start's own fit, before any other labelling
+        assert error < 10 if searched else error > 25, error
+
+
+def bone_lengths_of_walk(frames):
+    """The walker's bone lengths {key: [m]} (kinematics.lengths_of of the frames' true joints)."""
+    from mvpose_nodes.body.kinematics import lengths_of
+    return lengths_of(np.array([truth for truth, _ in frames]))
+
+
 def swapped_after_wrong_start(frames, pairs, monkeypatch, settings=None):
     """Fit the frames from a start whose triangulated pairs are labelled with `pairs` exchanged (as a start
     without a face to tell gets them): whether the start's own fit has any left/right pair nearer the other

@@ -52,6 +52,14 @@ from mvpose_nodes.fitting.stage_search import CAPSULE_ENDS, StageSearch, stage_i
 from mvpose_nodes.vision.contour import SIDE_A, SIDE_B, ContourLabels
 
 TORSO_POSITION = stage_indices('torso')[:3]   # torso_x, torso_y, torso_z: the root's position [m]
+TORSO_YAW = stage_indices('torso')[5]   # torso_rz: the body's turn about the vertical [rad]
+# A start's torso is also searched from its pose turned about the vertical by each of these [rad] (±45 and
+# ±90 degrees: every line of facing within 22.5 degrees of one start; which way along it, front or back, the
+# hypotheses decide): the facing from the keypoints (initialisation.completed_joints, the limbs' left-to-right
+# offsets) is 40-90 degrees off for a runner or walker mid-stride, whose ankles and wrists lie apart along
+# the way they go (in 20 of the suite's 46 tuning cases of seeds 1-4), and one search does not turn the
+# torso that far (search_stages).
+TORSO_START_YAWS = tuple(np.pi * eighth / 4 for eighth in (-2, -1, 1, 2))
 LOST_MARGIN = 0.25  # [m] an outline point this far from every bone is not explained by the skeleton
 # Keypoints read off the silhouette's shape (vision/silhouette.py): wrong once the image cuts the person off,
 # so left out then; but the root (the silhouette's centroid), shifted as it is, is kept at CUT_ROOT_CONFIDENCE
@@ -303,10 +311,11 @@ class SkeletonFitter:
     def search_stages(self, parameters, views, found, canonical=False, last=None, stale=False, kept=None):
         """The six stages of paper 000 Sec. 5.1 from `parameters` (29,); each stage after the torso's searched
         also from the frame's triangulated joints `found` ({joint: (3,)} or None) and, with `canonical` (a
-        start), each limb stage from the canonical limb poses (limb_starts.py), the best result kept (Sec.
-        5.3). `last`: the last fit's parameters when `parameters` are already the triangulated limbs (a gap
-        over velocity_horizon); `stale`: the last fit is over outline_horizon old; `kept`: {stage: StageResult}
-        of stages not searched, `parameters` already their fit. Returns the fitted parameters and the
+        start), the torso also from its pose turned by TORSO_START_YAWS and each limb stage from the
+        canonical limb poses (limb_starts.py), the best result kept (Sec. 5.3). `last`: the last fit's
+        parameters when `parameters` are already the triangulated limbs (a gap over velocity_horizon);
+        `stale`: the last fit is over outline_horizon old; `kept`: {stage: StageResult} of stages not
+        searched, `parameters` already their fit. Returns the fitted parameters and the
         stage_search.StageResults."""
         reference, _ = forward_kinematics(parameters, self.lengths)
         if found is not None:
@@ -323,7 +332,15 @@ class SkeletonFitter:
                 results.append(kept[stage])
                 continue
             assigned = self.stages.outline_assignment(stage, parameters, oriented)
-            if stage == 'torso' or (found is None and not canonical):
+            if stage == 'torso' and canonical:
+                def search_turned(yaw):
+                    turned = parameters.copy()
+                    turned[TORSO_YAW] += yaw
+                    return self.stages.search(stage, turned, oriented, assigned, frame)
+                # One assignment (from the start's pose) for all: their costs compare as they are.
+                searched, result = min(self.each(search_turned, (0.0,) + TORSO_START_YAWS),
+                                       key=lambda outcome: outcome[1].cost)
+            elif stage == 'torso' or (found is None and not canonical):
                 searched, result = self.stages.search(stage, parameters, oriented, assigned, frame)
             else:
                 if alternatives is None:   # starts relative to the fitted torso
