@@ -38,7 +38,7 @@ import numpy as np
 
 from mvpose_nodes.body.camera import intrinsics, look_at
 from mvpose_nodes.body.kinematics import BONES, bone_lengths, forward_kinematics, inverse_kinematics
-from mvpose_nodes.body.model import JOINT_INDEX, LABEL_TORSO, STAGE_NAMES
+from mvpose_nodes.body.model import JOINT_INDEX, LABEL_TORSO, PARAMETER_INDEX, STAGE_NAMES
 from mvpose_nodes.fitting.compiled import MAP_LABELS, nearest_capsules, pack_frame
 from mvpose_nodes.fitting.hypotheses import (PROBES, RELABELLINGS, START_LABELLINGS, Track, feet_outside,
                                              relabelled_joints, relabelled_stages)
@@ -52,7 +52,7 @@ from mvpose_nodes.fitting.stage_search import CAPSULE_ENDS, StageSearch, stage_i
 from mvpose_nodes.vision.contour import SIDE_A, SIDE_B, ContourLabels
 
 TORSO_POSITION = stage_indices('torso')[:3]   # torso_x, torso_y, torso_z: the root's position [m]
-TORSO_YAW = stage_indices('torso')[5]   # torso_rz: the body's turn about the vertical [rad]
+TORSO_YAW = PARAMETER_INDEX['torso_rz']   # the body's turn about the vertical [rad]
 # A start's torso is also searched from its pose turned about the vertical by each of these [rad] (±45 and
 # ±90 degrees: every line of facing within 22.5 degrees of one start; which way along it, front or back, the
 # hypotheses decide): the facing from the keypoints (initialisation.completed_joints, the limbs' left-to-right
