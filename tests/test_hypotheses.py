@@ -106,23 +106,18 @@ def test_a_start_turned_far_off_the_keypoints_yaw_finds_the_torso(walk, monkeypa
     mid-stride) fits the torso within 10 degrees of the truth's facing (or of its back: the hypotheses tell
     those apart), its torso searched also from the pose turned by ±45 and ±90 degrees; searched only from
     the keypoints' pose, it stays over 25 degrees off (36 and 55 here), so the check can fail."""
-    from mvpose_nodes.body.kinematics import inverse_kinematics
+    from mvpose_nodes.body.kinematics import inverse_kinematics, lengths_of
     if not searched:
         monkeypatch.setattr(fitter_module, 'TORSO_START_YAWS', ())
+    lengths = lengths_of(np.array([truth for truth, _ in walk]))   # the walker's own: only the facing is tested
     for truth, views in (walk[0], walk[4]):
         turned = inverse_kinematics(truth)
         turned[fitter_module.TORSO_YAW] += math.radians(80)
         monkeypatch.setattr(SkeletonFitter, 'initial_parameters', lambda self, views, found: turned.copy())
-        fitter = SkeletonFitter(lengths=bone_lengths_of_walk(walk))
+        fitter = SkeletonFitter(lengths=lengths)
         fitter.fit(0.0, views)
         error = torso_yaw_error(fitter.track.joints, truth)   # the start's own fit, before any other labelling
         assert error < 10 if searched else error > 25, error
-
-
-def bone_lengths_of_walk(frames):
-    """The walker's bone lengths {key: [m]} (kinematics.lengths_of of the frames' true joints)."""
-    from mvpose_nodes.body.kinematics import lengths_of
-    return lengths_of(np.array([truth for truth, _ in frames]))
 
 
 def swapped_after_wrong_start(frames, pairs, monkeypatch, settings=None):

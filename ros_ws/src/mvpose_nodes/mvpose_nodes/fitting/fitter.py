@@ -297,8 +297,8 @@ class SkeletonFitter:
         (hypotheses.feet_outside)."""
         oriented = [oriented_view(view, joints) for view in views]
         frame = pack_frame(oriented)
-        posed, frames = forward_kinematics(parameters, self.stages.lengths)
-        nearest = self.stages.outline_nearest(parameters, oriented, posed)
+        _, frames = forward_kinematics(parameters, self.stages.lengths)   # `joints` are its joints already
+        nearest = self.stages.outline_nearest(parameters, oriented, joints)
         cost = sum(self.stages.posed_cost(stage, parameters, oriented, frame, nearest, frames) for stage in STAGE_NAMES)
         hips = joints[JOINT_INDEX['right_hip']] - joints[JOINT_INDEX['left_hip']]
         if self.face_right is not None and np.dot(hips, self.face_right) < 0:
