@@ -181,9 +181,9 @@ def test_markers_eval_compares_the_three_methods(tmp_path, synth_bag):
 
 def test_eval_suite_runs_small_cases_and_prints_every_figure(tmp_path):
     """Issue 13's small suite for CI: 3 drawn cases at 960×540, 10 frame sets each, fitted as the node
-    fits them; the table has a row per case, a summary per motion set, and the worst case's pictures.
-    The same draw twice gives the same table (the suite is deterministic), the second time from the
-    features cache the first run wrote."""
+    fits them; the table has a row per case, a summary per motion set, and the worst case's pictures, and
+    cases.json the same figures. The same draw twice gives the same table (the suite is deterministic), the
+    second time from the features cache the first run wrote, and `eval compare` finds no difference."""
     cache = tmp_path / 'cache'
     arguments = ('eval', 'suite', '--cases', 3, '--frames', 10, '--resolution', '960x540', '--seed', 4,
                  '--features-cache', cache, '-o', tmp_path / 'suite')
@@ -199,10 +199,17 @@ def test_eval_suite_runs_small_cases_and_prints_every_figure(tmp_path):
                for line in first.stdout.splitlines()), first.stdout
     assert len(list((tmp_path / 'suite').glob('worst_case_*_error_per_frame.png'))) == 1
     assert len(list((tmp_path / 'suite').glob('worst_case_*_frame_*.png'))) == 1
+    figures = json.loads((tmp_path / 'suite' / 'cases.json').read_text())
+    assert figures['run']['seed'] == 4 and [case['index'] for case in figures['cases']] == [0, 1, 2]
+    assert [[f'{case[key]:.1f}' for key in ('mean', 'median', 'worst')] for case in figures['cases']] == [
+        row.split()[-6:-3] for row in rows], 'the table\'s figures'
     cached = {path: path.stat().st_mtime_ns for path in cache.glob('*.pkl')}
     again = run_mvpose(*arguments[:-1], tmp_path / 'again', '--only', 1, timeout=600)
     repeated = [line for line in again.stdout.splitlines() if line[:5].strip() == '1']
     assert [line.rsplit(maxsplit=1)[0] for line in repeated] == [rows[1].rsplit(maxsplit=1)[0]]   # all but fit ms
+    compared = run_mvpose('eval', 'compare', '--before', tmp_path / 'suite', '--after', tmp_path / 'again').stdout
+    assert '1 case run before and after (2 run on one side only, left out)' in compared
+    assert '+0.0 [+0.0, +0.0]' in compared and 'moved most' not in compared, compared
     assert {path: path.stat().st_mtime_ns for path in cache.glob('*.pkl')} == cached, 'read, not written again'
     gapped = run_mvpose(*arguments[:-1], tmp_path / 'gapped', '--only', 1, '--gaps', 2, 3, timeout=600)
     assert 'one frame set in every 2 or 3 (--gaps)' in gapped.stderr
@@ -225,15 +232,16 @@ def test_the_suite_keeps_each_window_in_view():
     to MIN_FULL_VIEWS cameras, and no further (one frame more would not); a turn on the spot keeps its 50."""
     from types import SimpleNamespace
     from mvpose_nodes.app import suite
+    from mvpose_nodes.app.suite import features as suite_features
     from mvpose_nodes.studio.cases import MIN_FULL_VIEWS, full_views
     from mvpose_nodes.studio.catalogue import load_motion
     runs = suite.draw_cases(SimpleNamespace(motions='amp_run', seed=1, frames=50, cameras=None, cases=4),
                             (1920, 1080))
     assert any(case.frames < 50 for case in runs)
     for case in runs:
-        assert (full_views(case, suite.case_motion(case).joints) >= MIN_FULL_VIEWS).all(), case.index
+        assert (full_views(case, suite_features.case_motion(case).joints) >= MIN_FULL_VIEWS).all(), case.index
         if case.frames < 50:
-            longer = suite.placed_window(load_motion(case.motion, height=case.height), case, case.frames + 1)
+            longer = suite_features.placed_window(load_motion(case.motion, height=case.height), case, case.frames + 1)
             assert (full_views(case, longer.joints) < MIN_FULL_VIEWS).any(), case.index
     turns = suite.draw_cases(SimpleNamespace(motions='turn_on_the_spot', seed=1, frames=50, cameras=None, cases=3),
                              (1920, 1080))
@@ -244,21 +252,22 @@ def test_suite_features_cache_reads_back_what_it_wrote_and_recomputes_a_damaged_
                                                                                      monkeypatch):
     from types import SimpleNamespace
     from mvpose_nodes.app import suite
+    from mvpose_nodes.app.suite import features as suite_features
     args = SimpleNamespace(motions='tuning', seed=3, frames=2, cameras=[3, 5], cases=1)
     [case] = suite.draw_cases(args, (480, 270))
-    motion = suite.case_motion(case)
+    motion = suite_features.case_motion(case)
 
-    computed = suite.case_features(case, motion)   # the messages as the node gets them: float32 fields rounded
+    computed = suite_features.case_features(case, motion)   # the messages as the node gets them: float32 fields rounded
     assert len(computed) == 2 and set(computed[0][1]) == {3, 5}
     confidence = computed[0][1][3][0].face_visibility
     assert 0 < confidence < 1 and confidence == np.float32(confidence), 'serialised and read back'
-    assert suite.case_features(case, motion, tmp_path) == computed
+    assert suite_features.case_features(case, motion, tmp_path) == computed
     [stored] = tmp_path.glob('*.pkl')
     with monkeypatch.context() as patch:
-        patch.setattr(suite, 'render_camera', lambda *_: pytest.fail('rendered again: the cache was not read'))
-        assert suite.case_features(case, motion, tmp_path) == computed
+        patch.setattr(suite_features, 'render_camera', lambda *_: pytest.fail('rendered again: the cache was not read'))
+        assert suite_features.case_features(case, motion, tmp_path) == computed
     stored.write_bytes(b'not a pickle')
-    assert suite.case_features(case, motion, tmp_path) == computed
+    assert suite_features.case_features(case, motion, tmp_path) == computed
     assert 'unreadable' in capsys.readouterr().err and stored.read_bytes() != b'not a pickle'
 
 

@@ -101,13 +101,17 @@ def eval_main(argv=None, prog='eval'):
     if argv[:1] == ['suite']:   # `eval suite`: randomised studio cases (a bag named suite: ./suite)
         from mvpose_nodes.app.suite import main
         return main(argv[1:], prog=f'{prog} suite')
+    if argv[:1] == ['compare']:   # `eval compare`: two suite runs case by case
+        from mvpose_nodes.app.suite.compare import main
+        return main(argv[1:], prog=f'{prog} compare')
     parser = build_parser(prog)
     compared = parser.add_mutually_exclusive_group()
     compared.add_argument('--truth', type=Path, help='bag with /mvpose/ground_truth (default: the recorded bag)')
     compared.add_argument('--against', type=Path, metavar='OTHER_RUN',
                           help="another recorded run's bag: how far its /mvpose/skeleton is from this one's, "
                                'frame set by frame set (is the graph repeatable?)')
-    parser.epilog = '`eval suite --help`: the fitter over randomised studio cases instead of one bag.'
+    parser.epilog = ('`eval suite --help`: the fitter over randomised studio cases instead of one bag; '
+                     '`eval compare --help`: two suite runs case by case.')
     args = parser.parse_args(argv)
     with exit_on_user_error(prog):
         from mvpose_nodes.app.reports.accuracy import print_table_2

@@ -108,7 +108,8 @@ def studio_pairs(index, seed):
     """(RGB (H, W, 3) uint8 through the case's JPEG, skin (H, W) bool, person (H, W) bool) of person `index`
     of the draw seeded `seed`: a suite case over the tuning motions (studio.cases.draw_case), its first
     STUDIO_CAMERAS cameras at STUDIO_FRAMES instants of its motion window drawn from the same seed."""
-    from mvpose_nodes.app.suite import case_motion, chosen_motions, render_camera
+    from mvpose_nodes.app.suite import chosen_motions
+    from mvpose_nodes.app.suite.features import case_motion, render_camera
     from mvpose_nodes.studio import scene
     from mvpose_nodes.studio.cases import case_rng, draw_case
     from mvpose_nodes.studio.catalogue import motion_length

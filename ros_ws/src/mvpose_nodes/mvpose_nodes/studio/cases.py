@@ -28,7 +28,7 @@ point 20 px off); aimed at 1.0 m, the middle of the tallest person, the worst ca
 the ±15 % asked for holds with no tightening. The studio's rig itself (studio_rig) is unchanged.
 A motion that travels further leaves the views (a run crosses a 6–10 m ring in two seconds, past the
 cameras); the suite shortens such a window until every frame shows the whole person to at least
-MIN_FULL_VIEWS of the case's cameras (full_views; app/suite.py, in_view).
+MIN_FULL_VIEWS of the case's cameras (full_views; app/suite/__init__.py, in_view).
 
 Draws happen in a fixed order, every value is always drawn (even when `cameras` is given or the motion
 is shorter than the window), so a Generator seeded alike gives the same case: the suite seeds one per

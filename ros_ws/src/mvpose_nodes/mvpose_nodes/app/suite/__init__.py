@@ -10,17 +10,17 @@ skeleton_fitter node runs. Nothing crosses DDS, so a case's figures do not depen
 Printed: a row per case (motion, rig, body, mean / median / worst-frame error, frames with a left/right
 swap after the first SWAP_GRACE_FRAMES, frame sets without a skeleton, median fit time), and per motion
 set (tuning, held-out, stress) the mean, median, 90th percentile and worst of the cases' mean errors,
-plus each joint's mean. Written to --output: the worst case's per-frame error plot and an overlay of
-its worst frame over the cameras it used.
+plus each joint's mean. Written to --output: every case's row as JSON (FIGURES_FILE, which `eval compare`
+reads), the worst case's per-frame error plot and an overlay of its worst frame over the cameras it used.
 
 With --features-cache DIR a case's feature messages are kept after their first computation and read back
 the next time (rendering and features are 90 % of the suite's time), for fitter work: the key is
-the case and the code and data that make its features (FEATURE_SOURCES and the skin model), so a change
-to those is never read from a stale cache.
+the case and the code and data that make its features (suite.features.FEATURE_SOURCES and the skin
+model), so a change to those is never read from a stale cache, and a change to this module's tables is
+not one of them.
 """
-import hashlib
+import json
 import math
-import pickle
 import sys
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
@@ -28,13 +28,12 @@ from pathlib import Path
 
 import numpy as np
 
+from mvpose_nodes.app.suite.features import case_features, case_motion, placed_window, render_camera
 from mvpose_nodes.tools.cli import ArgumentParser, UserError, end_with_parent, exit_on_user_error
 
 SWAP_GRACE_FRAMES = 10   # the first frames of a case may still be sorting left from right (issue 13's target)
-# What makes a case's feature messages, beside the case itself: the package's folders and modules (relative
-# to it) whose change invalidates --features-cache.
-FEATURE_SOURCES = ('studio', 'vision', 'body', 'ros/conversions.py', 'app/suite.py')
 MOTION_SETS = ('tuning', 'held-out', 'stress')
+FIGURES_FILE = 'cases.json'   # in --output: every case's row of the table (write_figures), for `eval compare`
 
 
 def build_parser(prog):
@@ -58,7 +57,8 @@ def build_parser(prog):
                              'cannot keep up: each next one G frame sets on, G drawn per step (seeded by the '
                              'case) from these, e.g. --gaps 1 2 2 3 (default: every frame set)')
     parser.add_argument('-o', '--output', type=Path, default=Path('output/suite'),
-                        help='folder for the worst case\'s pictures (default output/suite)')
+                        help=f"folder for every case's figures ({FIGURES_FILE}) and the worst case's pictures "
+                             '(default output/suite)')
     parser.add_argument('--features-cache', type=Path, metavar='DIR',
                         help="keep each case's feature messages in DIR and read them back on later runs (for "
                              'fitter work; renewed when the studio, features or conversion code changes)')
@@ -142,6 +142,8 @@ def main(argv=None, prog='eval suite'):
                 progress.update()
         progress.close()
         report(results)
+        figures = write_figures(results, args, args.output / FIGURES_FILE)
+        print(f'[suite] every case\'s figures: {figures} (`eval compare` pairs them with another run\'s)', file=sys.stderr)
         pictures(max(results, key=lambda r: r.mean_error), args.output)
     return 0
 
@@ -181,46 +183,6 @@ class CaseResult:
     def per_frame(self):
         """(F,) [mm] the mean joint error of each frame set, NaN where no skeleton came."""
         return self.errors.mean(axis=1)
-
-
-def case_motion(case):
-    """The case's BodyMotion window (frames, at 25 fps) placed at its centre and heading."""
-    from mvpose_nodes.studio.catalogue import load_motion
-    return placed_window(load_motion(case.motion, height=case.height), case, case.frames)
-
-
-def placed_window(motion, case, frames):
-    """`frames` frames of the BodyMotion `motion` from the case's start, placed at its centre and heading."""
-    window = motion.select(motion.first_frame + case.start, motion.first_frame + case.start + frames - 1)
-    return window.placed(center=case.centre, heading=case.heading)
-
-
-def pose_at(motion, position):
-    """scene.BodyPose at a fractional frame index `position` (linear between frames, clamped)."""
-    from mvpose_nodes.studio import scene
-    position = float(np.clip(position, 0, len(motion.joints) - 1))
-    low = int(math.floor(position))
-    high, weight = min(low + 1, len(motion.joints) - 1), position - low
-
-    def at(values):
-        return (1 - weight) * values[low] + weight * values[high]
-    forward = at(motion.head_forward)
-    return scene.BodyPose(at(motion.joints), at(motion.toes), at(motion.hand_tips), forward / np.linalg.norm(forward))
-
-
-def render_camera(case, view, motion, index):
-    """One camera's image of frame `index`, at its jittered instant: RGB (H, W, 3) uint8 through JPEG, and its
-    ground-truth labels (H, W) uint8 (scene.Rendering.labels: body part, SKIN_BIT on skin)."""
-    import cv2
-    from mvpose_nodes.studio import scene
-    from mvpose_nodes.studio.i3dpost import FRAME_RATE
-    number = view.camera.number
-    pose = pose_at(motion, index + case.jitter[case.cameras.index(number)] * FRAME_RATE)
-    shadow, centre = scene.floor_shadow(pose, case.appearance) if case.shadows else (None, None)
-    rendering = scene.render(view, pose, case.appearance, shadow, centre)
-    rgb, _ = case.realism.finish(rendering, view, number, case.seed, index)
-    ok, data = cv2.imencode('.jpg', cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR), [cv2.IMWRITE_JPEG_QUALITY, case.jpeg_quality])
-    return cv2.cvtColor(cv2.imdecode(data, cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB), rendering.labels
 
 
 def run_case(case, true_lengths=False, features_cache=None, gaps=None):
@@ -265,82 +227,35 @@ def passed_over_by(count, gaps, seed):
     return passed_over
 
 
-def case_features(case, motion, cache=None):
-    """Per frame set of the case: (stamp [ns], {camera: (SkinEllipseArray, LabelledContour)}), each image
-    rendered and put through the camera_features pipeline and its messages, serialised and read back as the
-    skeleton_fitter receives them over DDS (the float32 fields rounded); read from the folder `cache` if it
-    has them for this case and code (cache_key), else computed and, with a cache, written there."""
-    from rclpy.serialization import deserialize_message, serialize_message
-    from std_msgs.msg import Header
-    from mvpose_msgs.msg import LabelledContour, SkinEllipseArray
-    from mvpose_nodes.ros.camera_bag import frame_stamp_ns
-    from mvpose_nodes.ros.conversions import feature_messages, optical_frame, set_stamp
-    from mvpose_nodes.ros.params import default_skin_model_path
-    from mvpose_nodes.studio import scene
-    from mvpose_nodes.vision.features import FeatureExtractor, FeatureSettings
-    from mvpose_nodes.vision.skin import SkinModel
-
-    path = None if cache is None else Path(cache) / f'{cache_key(case, default_skin_model_path())}.pkl'
-    serialised = None   # per frame set: (stamp, {camera: (ellipses, contour) serialised})
-    if path is not None and path.is_file():
-        try:
-            serialised = pickle.loads(path.read_bytes())
-        except (pickle.UnpicklingError, EOFError, ValueError) as error:   # computed again and written anew
-            print(f'[suite] {path}: unreadable ({error}); computing the features again', file=sys.stderr)
-    if serialised is None:
-        cameras = {c.number: c for c in case.rig if c.number in case.cameras}
-        views = [scene.prepare_camera(cameras[k], texture_seed=k) for k in case.cameras]
-        skin = SkinModel.load(default_skin_model_path())
-        extractors = {k: FeatureExtractor(FeatureSettings(), skin) for k in case.cameras}
-        serialised = []
-        for index in range(len(motion.joints)):
-            stamp, messages = frame_stamp_ns(index), {}
-            for view in views:
-                number = view.camera.number
-                header = set_stamp(Header(), stamp, optical_frame(number))
-                features = extractors[number](render_camera(case, view, motion, index)[0])
-                messages[number] = tuple(map(serialize_message, feature_messages(features, header)))
-            serialised.append((stamp, messages))
-        if path is not None:
-            path.parent.mkdir(parents=True, exist_ok=True)
-            partial = path.with_suffix('.partial')
-            partial.write_bytes(pickle.dumps(serialised))
-            partial.replace(path)   # a run stopped while writing leaves no half file under the key
-    return [(stamp, {number: (deserialize_message(ellipses, SkinEllipseArray),
-                              deserialize_message(contour, LabelledContour))
-                     for number, (ellipses, contour) in messages.items()}) for stamp, messages in serialised]
-
-
-def cache_key(case, skin_model_path):
-    """SHA-256 (hex) of the case, the skin model and the FEATURE_SOURCES of this package."""
-    package = Path(__file__).resolve().parents[1]
-    digest = hashlib.sha256(pickle.dumps(case, protocol=4))
-    digest.update(Path(skin_model_path).read_bytes())
-    for source in FEATURE_SOURCES:
-        for file in sorted((package / source).rglob('*.py')) if (package / source).is_dir() else [package / source]:
-            digest.update(file.relative_to(package).as_posix().encode() + file.read_bytes())
-    return digest.hexdigest()
+def case_figures(result):
+    """A case's row of the table: {'index', 'set', 'motion', 'rig', 'body', 'imaging' (studio.cases.describe_case),
+    'mean', 'median', 'worst' [mm] of its frame sets' mean joint errors (None without a skeleton), 'swaps' (frame
+    sets with a left/right swap after the first SWAP_GRACE_FRAMES), 'none' (frame sets without a skeleton),
+    'fit_ms' (median fit time, None without a fit)}."""
+    from mvpose_nodes.studio.cases import describe_case
+    per_frame = result.per_frame
+    finite = per_frame[np.isfinite(per_frame)]
+    return {'index': result.case.index, 'set': motion_set(result.case.motion), **describe_case(result.case),
+            **({'mean': float(np.mean(finite)), 'median': float(np.median(finite)), 'worst': float(np.max(finite))}
+               if len(finite) else {'mean': None, 'median': None, 'worst': None}),
+            'swaps': int(result.swapped[SWAP_GRACE_FRAMES:].sum()), 'none': int(result.unanswered),
+            'fit_ms': 1000 * float(np.median(result.fit_seconds)) if result.fit_seconds else None}
 
 
 def report(results):
     """The per-case table and the per-set summary on stdout."""
     from mvpose_nodes.app.reports.accuracy import PAPER_MEAN_MM
     from mvpose_nodes.body.model import JOINT_NAMES
-    from mvpose_nodes.studio.cases import describe_case
     print(f'eval suite: {len(results)} cases   errors in mm (the mean joint error of a frame set, Eq. 12)')
     print(f'  {"#":>2} {"set":<8} {"motion":<24} {"rig":<30} {"body":<40} {"mean":>6} {"median":>6} '
           f'{"worst":>6} {"swaps":>5} {"none":>4} {"fit ms":>6}')
     for result in results:
-        described = describe_case(result.case)
-        per_frame = result.per_frame
-        finite = per_frame[np.isfinite(per_frame)]
-        none = result.unanswered
-        swaps = int(result.swapped[SWAP_GRACE_FRAMES:].sum())
-        fit_ms = 1000 * np.median(result.fit_seconds) if result.fit_seconds else math.nan
-        cells = (f'{np.mean(finite):6.1f} {np.median(finite):6.1f} {np.max(finite):6.1f}' if len(finite)
+        row = case_figures(result)
+        cells = (f'{row["mean"]:6.1f} {row["median"]:6.1f} {row["worst"]:6.1f}' if row['mean'] is not None
                  else f'{"–":>6} {"–":>6} {"–":>6}')
-        print(f'  {result.case.index:>2} {motion_set(result.case.motion):<8} {described["motion"][:24]:<24} '
-              f'{described["rig"][:30]:<30} {described["body"][:40]:<40} {cells} {swaps:>5} {none:>4} {fit_ms:>6.0f}')
+        fit_ms = math.nan if row['fit_ms'] is None else row['fit_ms']
+        print(f'  {row["index"]:>2} {row["set"]:<8} {row["motion"][:24]:<24} {row["rig"][:30]:<30} '
+              f'{row["body"][:40]:<40} {cells} {row["swaps"]:>5} {row["none"]:>4} {fit_ms:>6.0f}')
     for name in MOTION_SETS:
         chosen = [r for r in results if motion_set(r.case.motion) == name]
         if not chosen:
@@ -355,6 +270,17 @@ def report(results):
               f'{sum(r.unanswered for r in chosen)}')
     joint_means = np.nanmean(np.concatenate([r.errors for r in results]), axis=0)
     print('  per joint (all cases): ' + ', '.join(f'{n} {m:.0f}' for n, m in zip(JOINT_NAMES, joint_means)))
+
+
+def write_figures(results, args, path):
+    """The table's rows (case_figures) as JSON in `path`, with the draw's seed and the run's settings, for
+    `eval compare`. Returns the path."""
+    run = {'seed': args.seed, 'motions': args.motions, 'frames': args.frames, 'resolution': args.resolution,
+           'cameras': args.cameras, 'gaps': args.gaps, 'true_lengths': args.true_lengths}
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps({'run': run, 'cases': [case_figures(r) for r in results]}, indent=1) + '\n')
+    return path
 
 
 def pictures(worst, output):
