@@ -4,6 +4,7 @@ walk and on a turn on the spot, where the direction of travel cannot help; with 
 the same starts stay wrong, so the checks can fail. Keypoints are exact and the silhouettes the studio's
 true masks: what is tested is the choice between labellings, not the features (those: the suite,
 test_commands.py)."""
+import functools
 import math
 
 import numpy as np
@@ -163,6 +164,22 @@ def test_without_the_hypotheses_a_wrong_start_stays_wrong(frames, labelling, req
     _, swapped = swapped_after_wrong_start(request.getfixturevalue(frames), RELABELLINGS[labelling], monkeypatch,
                                            FitterSettings(probe_period=100000, crossing_distance=0.0))
     assert all(swapped[WITHIN:]), swapped
+
+
+@pytest.mark.parametrize('probed', ['turned round', 'arms exchanged'])
+def test_the_periodic_probe_rights_a_fit_turned_round(walk, monkeypatch, probed):
+    """A fit turned round that no start hypothesis rights (none followed here, nor any stride's probe of the
+    legs) is right again once the body turned round is probed (hypotheses.PERIODIC_PROBE, every
+    probe_period frame sets: 2 here) and its fits explain the views better over hypothesis_frames; a probe
+    of another labelling leaves it turned round, so the check can fail."""
+    monkeypatch.setattr(fitter_module, 'START_LABELLINGS', ())
+    monkeypatch.setattr(SkeletonFitter, 'probe', functools.partialmethod(SkeletonFitter.probe, labelling=probed))
+    _, swapped = swapped_after_wrong_start(walk, RELABELLINGS['turned round'], monkeypatch,
+                                           FitterSettings(probe_period=2, crossing_distance=0.0))
+    if probed == 'turned round':
+        assert not any(swapped[WITHIN:]), swapped
+    else:
+        assert all(swapped[WITHIN:]), swapped
 
 
 def test_the_face_the_views_see_weighs_on_front_and_back(standing, monkeypatch):

@@ -40,7 +40,7 @@ from mvpose_nodes.body.camera import intrinsics, look_at
 from mvpose_nodes.body.kinematics import BONES, bone_lengths, forward_kinematics, inverse_kinematics
 from mvpose_nodes.body.model import JOINT_INDEX, LABEL_TORSO, PARAMETER_INDEX, STAGE_NAMES
 from mvpose_nodes.fitting.compiled import MAP_LABELS, nearest_capsules, pack_frame
-from mvpose_nodes.fitting.hypotheses import (PROBES, RELABELLINGS, START_LABELLINGS, Track, feet_outside,
+from mvpose_nodes.fitting.hypotheses import (PERIODIC_PROBE, RELABELLINGS, START_LABELLINGS, Track, feet_outside,
                                              relabelled_joints, relabelled_stages)
 from mvpose_nodes.fitting.initialisation import (completed_joints, consistent_views, facing_right, labelled_joints,
                                                  person_lengths, stature, triangulated_joints, upright)
@@ -118,7 +118,6 @@ class SkeletonFitter:
         self.window = 0       # frame sets left before they are compared with it
         self.starting = False  # the comparison is a start's (its fits are INITIALISING)
         self.since_probe = 0  # frame sets since the last probe ended
-        self.probes = 0       # probes so far (which labelling is next: PROBES in turn)
         self.lost_fits = 0    # consecutive fits that left much of the outline unexplained (unexplained_share)
         self.start_labels = None  # the start's triangulated joints, labelled (initial_parameters)
         self.face_right = None    # this frame set's person's right as the face says (initialisation.facing_right)
@@ -209,12 +208,8 @@ class SkeletonFitter:
             return [function(item) for item in items]
         return list(self.pool.map(function, items))
 
-    def probe(self, stamp, views, found, labelling=None):
-        """Follow `labelling` (hypotheses.RELABELLINGS; None: the next of hypotheses.PROBES) beside the fit,
-        from this frame set on."""
-        if labelling is None:
-            labelling = PROBES[self.probes % len(PROBES)]
-            self.probes += 1
+    def probe(self, stamp, views, found, labelling=PERIODIC_PROBE):
+        """Follow `labelling` (a name of hypotheses.RELABELLINGS) beside the fit, from this frame set on."""
         self.track.cost = self.cost_of(self.track.parameters, self.track.joints, views)
         self.rivals = [self.spawn(RELABELLINGS[labelling], stamp, views, found)]
         self.window, self.since_probe = self.settings.hypothesis_frames, 0

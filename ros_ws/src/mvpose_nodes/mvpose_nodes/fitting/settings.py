@@ -107,7 +107,8 @@ class FitterSettings:
              "a labelling's cost when labellings are compared (hypotheses.feet_outside; 0: the feet are not asked)",
         0.0, 1e4)
     probe_period: int = setting(
-        10, 'frame sets between probes: one other labelling at a time followed beside the fit', 1, 100000)
+        10, 'frame sets between probes of the body turned round, followed beside the fit (the legs exchanged are '
+            'probed after each stride)', 1, 100000)
     hypothesis_margin: float = setting(
         0.02, "a probed labelling replaces the fit when its fits' cost over hypothesis_frames is this share lower",
         0.0, 1.0)

@@ -1,13 +1,13 @@
 """`eval compare`: two runs of `eval suite` (before and after a change) case by case.
 
-A change to the fitter moves most cases by a few mm and a few by hundreds, either way, when it changes
-which labelling of the body (turned round, legs or arms exchanged) the fit settles on; a one-nanometre
-nudge of the keypoints does the same (docs/method.md, *The suite's noise*). So two means side by side say
-little: this pairs the cases of the same draws (by the draw's seed and the case's number, checked by its
-motion, rig and body), and prints per motion set the mean of the paired differences with its bootstrap
-interval (app/reports/accuracy.paired_difference), how many cases moved by more than --moved mm either
-way, the cases within the paper's 44.4 mm and the left/right swaps before and after, and the cases that
-moved most.
+A change to the fitter's evidence or costs moves most cases by a few mm and a few by hundreds, either
+way, when it changes which labelling of the body (turned round, legs or arms exchanged) the fit settles
+on (docs/method.md, session 30). So two means side by side say little: this pairs the cases of the same
+draws (by the draw's seed and the case's number, checked by its motion, rig, body and imaging), and
+prints per motion set the mean of the paired differences with its bootstrap interval
+(app/reports/accuracy.paired_difference), how many cases moved by more than --moved mm either way, the
+cases within the paper's 44.4 mm and the left/right swaps before and after, and the cases that moved
+most.
 
 Each side is one or more `eval suite` output folders (or their cases.json, suite.FIGURES_FILE), e.g. the
 same seeds run before and after: `eval compare --before out/a1 out/a2 --after out/b1 out/b2`.
