@@ -392,7 +392,13 @@ class SkeletonFitter:
         lengths become the median of the measurements (initialisation.person_lengths) whose stature is
         within stature_spread of the tallest, as knees bend while walking and a crouch shortens; so
         neither a first frame set crouched, sitting or with raised arms nor one rough triangulation
-        sets them."""
+        sets them. Once there is a fit, the pelvis is measured at its height (the torso fitted to the views'
+        outlines), not at the root keypoint's: that is the silhouettes' centroid, which lies 7-112 mm below
+        the pelvis for the suite's CMU walkers and up to 270 mm above it with the arms raised (session 29),
+        and the legs measured from it were as much too short or too long."""
+        if self.given is not None:
+            joints = dict(joints)
+            joints['pelvis'] = np.r_[joints['pelvis'][:2], self.given.joints[JOINT_INDEX['pelvis'], 2]]
         if (self.measurements is None or len(self.measurements) >= self.settings.length_frames
                 or not upright(joints, self.settings)):
             return
