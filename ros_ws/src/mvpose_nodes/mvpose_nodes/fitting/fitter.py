@@ -392,16 +392,21 @@ class SkeletonFitter:
         lengths become the median of the measurements (initialisation.person_lengths) whose stature is
         within stature_spread of the tallest, as knees bend while walking and a crouch shortens; so
         neither a first frame set crouched, sitting or with raised arms nor one rough triangulation
-        sets them. Once there is a fit, the pelvis is measured at its height (the torso fitted to the views'
-        outlines), not at the root keypoint's: that is the silhouettes' centroid, which lies 7-112 mm below
-        the pelvis for the suite's CMU walkers and up to 270 mm above it with the arms raised (session 29),
-        and the legs measured from it were as much too short or too long."""
-        if self.given is not None:
-            joints = dict(joints)
-            joints['pelvis'] = np.r_[joints['pelvis'][:2], self.given.joints[JOINT_INDEX['pelvis'], 2]]
-        if (self.measurements is None or len(self.measurements) >= self.settings.length_frames
-                or not upright(joints, self.settings)):
+        sets them. Once there is a fit, the legs are measured from its pelvis's height (the torso fitted to
+        the views' outlines), not from the root keypoint's: that is the silhouettes' centroid, which lies
+        7-112 mm below the pelvis for the suite's CMU walkers and up to 270 mm above it with the arms raised
+        (session 29), and the legs measured from it were as much too short or too long. Upright is either
+        pelvis's verdict: the fit's alone would never measure again after a start crouched (its short
+        lengths keep the fits low), the root's alone not the person whose centroid sits far off."""
+        if self.measurements is None or len(self.measurements) >= self.settings.length_frames:
             return
+        measured = joints
+        if self.given is not None:
+            measured = dict(joints)
+            measured['pelvis'] = np.r_[joints['pelvis'][:2], self.given.joints[JOINT_INDEX['pelvis'], 2]]
+        if not (upright(measured, self.settings) or upright(joints, self.settings)):
+            return
+        joints = measured
         self.measurements.append(person_lengths(joints, self.settings))
         tallest = max(stature(m) for m in self.measurements)
         standing = [m for m in self.measurements if stature(m) >= (1 - self.settings.stature_spread) * tallest]
