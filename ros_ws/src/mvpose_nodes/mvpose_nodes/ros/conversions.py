@@ -104,12 +104,11 @@ def image_from_compressed(message):
     mono = message.format.startswith('mono8')
     if not len(message.data):
         raise ValueError(f"CompressedImage has no data (format '{message.format}')")
-    # Straight to RGB: libjpeg writes the channels in that order (the same pixels as BGR, then swapped,
-    # without the pass over the image: 6.6 -> 6.1 ms per 1080p frame). The data is read where it lies.
-    decoded = cv2.imdecode(np.frombuffer(message.data, np.uint8), cv2.IMREAD_GRAYSCALE if mono else cv2.IMREAD_COLOR_RGB)
+    decoded = cv2.imdecode(np.frombuffer(bytes(message.data), np.uint8),
+                           cv2.IMREAD_GRAYSCALE if mono else cv2.IMREAD_COLOR)
     if decoded is None:
         raise ValueError(f"CompressedImage data does not decode (format '{message.format}')")
-    return decoded
+    return decoded if mono else cv2.cvtColor(decoded, cv2.COLOR_BGR2RGB)
 
 
 def image_from_raw(message):
