@@ -159,7 +159,7 @@ class SkeletonFitter:
             def follow(track):
                 self.follow(track, stamp, views, found)
                 if comparing:
-                    track.cost += self.cost_of(track.parameters, track.joints, views)
+                    track.cost += self.cost_of(track.parameters, views)
             self.each(follow, [self.track] + self.rivals)
             ankles = self.track.joints[[JOINT_INDEX['left_ankle'], JOINT_INDEX['right_ankle']]]
             apart = np.linalg.norm(ankles[0] - ankles[1]) >= settings.crossing_distance
@@ -195,7 +195,7 @@ class SkeletonFitter:
             raise ValueError('too few views with keypoints to initialise (need root, neck and head in 2 views)')
         self.track = Track(start, LimbTracks(self.settings))
         self.follow(self.track, stamp, views, found, canonical=True)
-        self.track.cost = self.cost_of(self.track.parameters, self.track.joints, views)
+        self.track.cost = self.cost_of(self.track.parameters, views)
         self.rivals = self.each(lambda pairs: self.spawn(pairs, stamp, views, found),
                                 [pairs for _, pairs in START_LABELLINGS])
         self.window, self.starting, self.lost_fits = self.settings.hypothesis_frames, True, 0
@@ -210,7 +210,7 @@ class SkeletonFitter:
 
     def probe(self, stamp, views, found, labelling=PERIODIC_PROBE):
         """Follow `labelling` (a name of hypotheses.RELABELLINGS) beside the fit, from this frame set on."""
-        self.track.cost = self.cost_of(self.track.parameters, self.track.joints, views)
+        self.track.cost = self.cost_of(self.track.parameters, views)
         self.rivals = [self.spawn(RELABELLINGS[labelling], stamp, views, found)]
         self.window, self.since_probe = self.settings.hypothesis_frames, 0
 
@@ -228,7 +228,7 @@ class SkeletonFitter:
         rival.parameters, rival.results = self.search_stages(start, views, relabelled_joints(found, pairs), kept=kept)
         rival.joints, _ = forward_kinematics(rival.parameters, self.lengths)
         rival.limbs.append(stamp, rival.joints)
-        rival.cost = self.cost_of(rival.parameters, rival.joints, views)
+        rival.cost = self.cost_of(rival.parameters, views)
         return rival
 
     def prune(self):
@@ -284,15 +284,15 @@ class SkeletonFitter:
         pelvis = JOINT_INDEX['pelvis']
         return limbs.predicted(stamp)[pelvis] - limbs.history[-1][1][pelvis]
 
-    def cost_of(self, parameters, joints, views):
-        """How well the pose `parameters` (29,), joints (15, 3) [m], explains the views: the six stages' objectives (without the
+    def cost_of(self, parameters, views):
+        """How well the pose `parameters` (29,) explains the views: the six stages' objectives (without the
         smoothness prior, with the joint limits) with each view's left/right labels oriented to the pose
         and the outline assigned from it; raised by face_cost_share when the pose's hips face away from the
         face the views see (face_right), and by foot_weight per px² of its feet outside the silhouettes
         (hypotheses.feet_outside)."""
+        joints, frames = forward_kinematics(parameters, self.stages.lengths)
         oriented = [oriented_view(view, joints) for view in views]
         frame = pack_frame(oriented)
-        _, frames = forward_kinematics(parameters, self.stages.lengths)   # `joints` are its joints already
         nearest = self.stages.outline_nearest(parameters, oriented, joints)
         cost = sum(self.stages.posed_cost(stage, parameters, oriented, frame, nearest, frames) for stage in STAGE_NAMES)
         hips = joints[JOINT_INDEX['right_hip']] - joints[JOINT_INDEX['left_hip']]
@@ -406,8 +406,7 @@ class SkeletonFitter:
             measured['pelvis'] = np.r_[joints['pelvis'][:2], self.given.joints[JOINT_INDEX['pelvis'], 2]]
         if not (upright(measured, self.settings) or upright(joints, self.settings)):
             return
-        joints = measured
-        self.measurements.append(person_lengths(joints, self.settings))
+        self.measurements.append(person_lengths(measured, self.settings))
         tallest = max(stature(m) for m in self.measurements)
         standing = [m for m in self.measurements if stature(m) >= (1 - self.settings.stature_spread) * tallest]
         self.lengths = {key: float(np.median([m[key] for m in standing])) for key in standing[0]}

@@ -141,8 +141,8 @@ def main(argv=None, prog='eval suite'):
                 results.append(result)
                 progress.update()
         progress.close()
-        report(results)
-        figures = write_figures(results, args, args.output / FIGURES_FILE)
+        rows = report(results)
+        figures = write_figures(rows, args, args.output / FIGURES_FILE)
         print(f'[suite] every case\'s figures: {figures} (`eval compare` pairs them with another run\'s)', file=sys.stderr)
         pictures(max(results, key=lambda r: r.mean_error), args.output)
     return 0
@@ -243,43 +243,44 @@ def case_figures(result):
 
 
 def report(results):
-    """The per-case table and the per-set summary on stdout."""
+    """The per-case table and the per-set summary on stdout; returns the table's rows (case_figures)."""
     from mvpose_nodes.app.reports.accuracy import PAPER_MEAN_MM
     from mvpose_nodes.body.model import JOINT_NAMES
     print(f'eval suite: {len(results)} cases   errors in mm (the mean joint error of a frame set, Eq. 12)')
     print(f'  {"#":>2} {"set":<8} {"motion":<24} {"rig":<30} {"body":<40} {"mean":>6} {"median":>6} '
           f'{"worst":>6} {"swaps":>5} {"none":>4} {"fit ms":>6}')
-    for result in results:
-        row = case_figures(result)
+    rows = [case_figures(result) for result in results]
+    for row in rows:
         cells = (f'{row["mean"]:6.1f} {row["median"]:6.1f} {row["worst"]:6.1f}' if row['mean'] is not None
                  else f'{"–":>6} {"–":>6} {"–":>6}')
         fit_ms = math.nan if row['fit_ms'] is None else row['fit_ms']
         print(f'  {row["index"]:>2} {row["set"]:<8} {row["motion"][:24]:<24} {row["rig"][:30]:<30} '
               f'{row["body"][:40]:<40} {cells} {row["swaps"]:>5} {row["none"]:>4} {fit_ms:>6.0f}')
     for name in MOTION_SETS:
-        chosen = [r for r in results if motion_set(r.case.motion) == name]
+        chosen = [(r, row) for r, row in zip(results, rows) if row['set'] == name]
         if not chosen:
             continue
-        means = np.array([r.mean_error for r in chosen])
-        worst = chosen[int(np.argmax(means))]
+        means = np.array([r.mean_error for r, _ in chosen])
+        worst = chosen[int(np.argmax(means))][0]
         print(f'  {name}: {len(chosen)} cases: mean {np.mean(means):.1f}, median {np.median(means):.1f}, '
               f'90th percentile {np.percentile(means, 90):.1f}, worst {np.max(means):.1f} (case {worst.case.index}, '
               f'{worst.case.motion}); cases over {PAPER_MEAN_MM} mm: {int(np.sum(means > PAPER_MEAN_MM))}; '
               f'swapped frames after the first {SWAP_GRACE_FRAMES}: '
-              f'{sum(int(r.swapped[SWAP_GRACE_FRAMES:].sum()) for r in chosen)}; frame sets without a skeleton: '
-              f'{sum(r.unanswered for r in chosen)}')
+              f'{sum(row["swaps"] for _, row in chosen)}; frame sets without a skeleton: '
+              f'{sum(row["none"] for _, row in chosen)}')
     joint_means = np.nanmean(np.concatenate([r.errors for r in results]), axis=0)
     print('  per joint (all cases): ' + ', '.join(f'{n} {m:.0f}' for n, m in zip(JOINT_NAMES, joint_means)))
+    return rows
 
 
-def write_figures(results, args, path):
+def write_figures(rows, args, path):
     """The table's rows (case_figures) as JSON in `path`, with the draw's seed and the run's settings, for
     `eval compare`. Returns the path."""
     run = {'seed': args.seed, 'motions': args.motions, 'frames': args.frames, 'resolution': args.resolution,
            'cameras': args.cameras, 'gaps': args.gaps, 'true_lengths': args.true_lengths}
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps({'run': run, 'cases': [case_figures(r) for r in results]}, indent=1) + '\n')
+    path.write_text(json.dumps({'run': run, 'cases': rows}, indent=1) + '\n')
     return path
 
 

@@ -81,13 +81,13 @@ def summary_line(name, pairs, moved):
     before = np.array([b['mean'] for b, _ in answered])
     after = np.array([a['mean'] for _, a in answered])
     mean, low, high = paired_difference(before, after, CONFIDENCE)
-    swaps = [sum(row['swaps'] for row in side) for side in zip(*[(b, a) for _, b, a in pairs])]
+    swaps_before, swaps_after = sum(b['swaps'] for _, b, _ in pairs), sum(a['swaps'] for _, _, a in pairs)
     interval = f'{mean:+.1f} [{low:+.1f}, {high:+.1f}]'
     return (f'  {name:<9}{len(answered):>6}{before.mean():>10.1f} / {np.median(before):<9.1f}'
             f'{after.mean():>10.1f} / {np.median(after):<9.1f}{interval:<24}'
             f'{int(np.sum(after < before - moved)):>5} / {int(np.sum(after > before + moved)):<6}'
             f'{int(np.sum(before <= PAPER_MEAN_MM)):>5} -> {int(np.sum(after <= PAPER_MEAN_MM)):<5}'
-            f'{swaps[0]:>6} -> {swaps[1]}')
+            f'{swaps_before:>6} -> {swaps_after}')
 
 
 def main(argv=None, prog='eval compare'):
