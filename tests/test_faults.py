@@ -1,8 +1,10 @@
 """Faults the graph survives (issue 15), over DDS with the nodes as separate processes: a camera's feature
 node killed and started again, the fitter killed and started again. The launcher's respawn is tested in
 test_launcher.py, the synchroniser's odd stamps in test_sync.py."""
+import json
 import os
 import signal
+import time
 
 import pytest
 from common import GRAPH_CAMERAS, GRAPH_INPUTS, SKELETON_OUT, SkeletonRecorder, wait_for_graph
@@ -57,6 +59,14 @@ def kill(process):
     process.process.wait()
 
 
+def used_cameras(received):
+    """The cameras a DEGRADED skeleton names in its status message ('cameras used: [3, 5]', perhaps followed by
+    '; …'), None if it names none (all of them used)."""
+    first_part = received[3].split('; ')[0]
+    prefix = 'cameras used: '
+    return json.loads(first_part[len(prefix):]) if first_part.startswith(prefix) else None
+
+
 def bag_time(stamp, first):
     return (stamp - first) / 1e9
 
@@ -74,6 +84,9 @@ def test_a_camera_node_killed_leaves_a_degraded_fit_and_is_used_again_when_it_re
         killed_after = len(recorder.received)
         recorder.spin_for(2.0)
         start_camera(background, 7)
+        restarted = time.monotonic()
+        wait_for_graph(graph_inputs([7]))
+        back_after = time.monotonic() - restarted   # [s]: how long the node took to start, for the messages
         play_to_the_end(player, recorder)
     finally:
         recorder.close()
@@ -84,10 +97,14 @@ def test_a_camera_node_killed_leaves_a_degraded_fit_and_is_used_again_when_it_re
     after_kill = recorder.received[killed_after:]
     # A status message may go on to say that stale frame sets were skipped (while the fitter waits
     # camera_timeout for the silent camera, newer sets come): only its first part names the cameras.
-    degraded = [r for r in after_kill if r[3].split('; ')[0] == 'cameras used: [3, 5]']
+    degraded = [r for r in after_kill if used_cameras(r) == [3, 5]]
     assert degraded, after_kill
+    # Once camera 7 is back every fit uses it. Another camera may miss a set while camera 7's node starts
+    # beside it on the two cores (its features come after camera_timeout): that set is fitted without it.
     back = [r for r in after_kill if r[1] > degraded[-1][1]]
-    assert back and all(r[2] == 0 and not r[3].startswith('cameras used') for r in back[-5:]), back[-5:]   # STATUS_OK
+    started = f'camera 7 started {back_after:.1f} s after it was started again'
+    assert back and all(used_cameras(r) is None or 7 in used_cameras(r) for r in back), (started, back)
+    assert any(r[2] == 0 and used_cameras(r) is None for r in back), (started, back)   # STATUS_OK: all three
     assert bag_time(stamps[-1], first) == pytest.approx(59 * FRAME_NS / 1e9)   # up to the bag's last frame
 
 
