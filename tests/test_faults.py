@@ -102,7 +102,7 @@ def test_a_camera_node_killed_leaves_a_degraded_fit_and_is_used_again_when_it_re
     # Once camera 7 is back every fit uses it. Another camera may miss a set while camera 7's node starts
     # beside it on the two cores (its features come after camera_timeout): that set is fitted without it.
     back = [r for r in after_kill if r[1] > degraded[-1][1]]
-    started = f'camera 7 started {back_after:.1f} s after it was started again'
+    started = f'camera 7 connected {back_after:.1f} s after its restart'
     assert back and all(used_cameras(r) is None or 7 in used_cameras(r) for r in back), (started, back)
     assert any(r[2] == 0 and used_cameras(r) is None for r in back), (started, back)   # STATUS_OK: all three
     assert bag_time(stamps[-1], first) == pytest.approx(59 * FRAME_NS / 1e9)   # up to the bag's last frame
