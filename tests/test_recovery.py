@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from mvpose_nodes.body.camera import studio_rig
+from mvpose_nodes.body.model import JOINT_NAMES
 from mvpose_nodes.fitting.fitter import TORSO_POSITION, SkeletonFitter, unexplained_share
 from mvpose_nodes.fitting.initialisation import consistent_views, triangulated_joints
 from mvpose_nodes.fitting.settings import FitterSettings
@@ -102,3 +103,25 @@ def test_the_keypoints_of_the_camera_that_disagrees_are_the_ones_left_out(walk):
     assert sorted(set(moved[0].keypoints) - set(kept[0].keypoints)) == sorted(ARMS)
     assert all(kept_view.keypoints == view.keypoints for kept_view, view in zip(kept[1:], moved[1:]))
     assert consistent_views(moved, found, 10.0)[0].keypoints == moved[0].keypoints
+
+
+def test_a_keypoint_left_out_of_one_view_weighs_as_much_in_the_others(walk):
+    """StageSearch.keypoint_targets: a joint's keypoint weights sum to the same whether three views have it
+    or two (one left out), so the outline does not outweigh it where a camera's was far off; a keypoint
+    only one view has keeps its confidence."""
+    from mvpose_nodes.fitting.stage_search import StageSearch
+
+    def weights(views, name):
+        joint = JOINT_NAMES.index(name)
+        return [float(weight) for _, joints, _, stage_weights in StageSearch.keypoint_targets('left_arm', views)
+                for j, weight in zip(joints, stage_weights) if j == joint]
+
+    _, views = walk[0]
+    without = [replace(views[0], keypoints={n: v for n, v in views[0].keypoints.items() if n != 'left_wrist'})]
+    everywhere = weights(views, 'left_wrist')
+    assert len(everywhere) == 3
+    assert len(weights(without + views[1:], 'left_wrist')) == 2
+    assert sum(weights(without + views[1:], 'left_wrist')) == pytest.approx(sum(everywhere))
+    alone = [view if i == 1 else replace(view, keypoints={n: v for n, v in view.keypoints.items() if n != 'left_wrist'})
+             for i, view in enumerate(views)]
+    assert weights(alone, 'left_wrist') == [views[1].keypoints['left_wrist'][2]]

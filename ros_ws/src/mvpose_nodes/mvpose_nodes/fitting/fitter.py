@@ -149,6 +149,8 @@ class SkeletonFitter:
         self.face_right = None
         if found is not None:
             views = consistent_views(views, found, settings.keypoint_gate)
+            # Again from the keypoints kept: a joint that two views saw, one far off, was triangulated through it.
+            found = triangulated_joints(views, settings) or found
             self.measure(found)
             self.face_right = facing_right(views, found, settings.face_evidence)
         if self.track is None or jump or self.lost_fits >= settings.lost_frames:
