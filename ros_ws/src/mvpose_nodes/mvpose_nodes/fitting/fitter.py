@@ -1,7 +1,8 @@
 """Fitting the 29-DOF skeleton to the features of several calibrated views (paper 000 Sec. 4–6).
 
 Per frame set: the views' keypoints are triangulated (initialisation.triangulated_joints) and a view's
-keypoint that disagrees with the others is left out (initialisation.consistent_views). The pose follows
+keypoint that disagrees with the others is left out, the joints triangulated again without it
+(initialisation.consistent_evidence). The pose follows
 from the previous frame's, moved on at the pelvis's velocity (after a gap of over velocity_horizon, when
 frame sets were skipped to keep up: moved as far as the triangulated pelvis, its limbs started from the
 frame's triangulated joints, after one of over continuity_horizon labelled by the side of the body they
@@ -42,7 +43,7 @@ from mvpose_nodes.body.model import JOINT_INDEX, LABEL_TORSO, PARAMETER_INDEX, S
 from mvpose_nodes.fitting.compiled import MAP_LABELS, nearest_capsules, pack_frame
 from mvpose_nodes.fitting.hypotheses import (PERIODIC_PROBE, RELABELLINGS, START_LABELLINGS, Track, feet_outside,
                                              relabelled_joints, relabelled_stages)
-from mvpose_nodes.fitting.initialisation import (completed_joints, consistent_views, facing_right, labelled_joints,
+from mvpose_nodes.fitting.initialisation import (completed_joints, consistent_evidence, facing_right, labelled_joints,
                                                  person_lengths, stature, triangulated_joints, upright)
 from mvpose_nodes.fitting.limb_sides import LimbTracks, exchanged_pairs, oriented_view
 from mvpose_nodes.fitting.limb_starts import limb_start_joints
@@ -148,9 +149,7 @@ class SkeletonFitter:
         found = triangulated_joints(views, settings)
         self.face_right = None
         if found is not None:
-            views = consistent_views(views, found, settings.keypoint_gate)
-            # Again from the keypoints kept: a joint that two views saw, one far off, was triangulated through it.
-            found = triangulated_joints(views, settings) or found
+            views, found = consistent_evidence(views, found, settings)
             self.measure(found)
             self.face_right = facing_right(views, found, settings.face_evidence)
         if self.track is None or jump or self.lost_fits >= settings.lost_frames:

@@ -114,6 +114,17 @@ def consistent_views(views, found, gate):
     return kept
 
 
+def consistent_evidence(views, found, settings):
+    """(views, joints): consistent_views with settings.keypoint_gate, and the joints `found` triangulated
+    again from the keypoints it kept if it left any out (a joint that two views saw, one of them far off,
+    was triangulated through the bad keypoint); `found` itself if nothing was left out or too little is
+    left to triangulate from."""
+    kept = consistent_views(views, found, settings.keypoint_gate)
+    if all(len(kept_view.keypoints) == len(view.keypoints) for kept_view, view in zip(kept, views)):
+        return kept, found
+    return kept, triangulated_joints(kept, settings) or found
+
+
 def facing_right(views, joints, face_evidence):
     """The person's right (unit, horizontal) from where the face is seen: the cameras that see more skin
     on the head than the others (Features.frontness) are in front of the person (paper 000's views cannot
