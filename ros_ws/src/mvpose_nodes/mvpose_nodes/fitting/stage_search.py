@@ -12,7 +12,7 @@ own parameters with the rest fixed, minimising its own objective (weights: setti
     from the widths of shoulders and hips;
   - the reprojection distance of the joints that the features located in 2D (root, neck, head,
     elbows, wrists, knees, ankles), robust (keypoint_scale) and weighted by confidence, a joint's weight
-    shared among the views that kept its keypoint (keypoint_targets) (the paper uses
+    the same whether every view kept its keypoint or only some (keypoint_targets) (the paper uses
     these keypoints for initialisation; the arms have no labelled contour, so for them the skin
     keypoints are evidence too, as in paper 000 Sec. 3.2);
   - priors: smoothness towards the stage's start (25 fps) and joint limits.
@@ -355,8 +355,8 @@ class StageSearch:
         each view that has some. A keypoint's weight is its confidence, times (views / views that have it)
         when two views or more have it: a joint's keypoints weigh as much against the outline whether every
         view sees it or a view's was left out (initialisation.consistent_views: with one camera's elbows and
-        wrists 200 px off and left out, the rendered walk of test_recovery was fitted 11 % worse than with
-        them right, 3 % with the weights made up). One view's alone keeps its confidence: nothing checks it."""
+        wrists 200 px off and left out, the rendered walk of test_recovery was fitted 11-13 % worse than with
+        them right, 4-7 % with the weights made up). One view's alone keeps its confidence: nothing checks it."""
         targets = []
         views_with = {n: sum(n in view.keypoints for view in views) for n in STAGE_KEYPOINTS[stage]}
         for index, view in enumerate(views):
