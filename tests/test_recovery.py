@@ -116,12 +116,14 @@ def test_a_keypoint_left_out_of_one_view_weighs_as_much_in_the_others(walk):
         return [float(weight) for _, joints, _, stage_weights in StageSearch.keypoint_targets('left_arm', views)
                 for j, weight in zip(joints, stage_weights) if j == joint]
 
+    def without_wrist(view):
+        return replace(view, keypoints={n: v for n, v in view.keypoints.items() if n != 'left_wrist'})
+
     _, views = walk[0]
-    without = [replace(views[0], keypoints={n: v for n, v in views[0].keypoints.items() if n != 'left_wrist'})]
     everywhere = weights(views, 'left_wrist')
+    one_left_out = weights([without_wrist(views[0])] + views[1:], 'left_wrist')
     assert len(everywhere) == 3
-    assert len(weights(without + views[1:], 'left_wrist')) == 2
-    assert sum(weights(without + views[1:], 'left_wrist')) == pytest.approx(sum(everywhere))
-    alone = [view if i == 1 else replace(view, keypoints={n: v for n, v in view.keypoints.items() if n != 'left_wrist'})
-             for i, view in enumerate(views)]
+    assert len(one_left_out) == 2
+    assert sum(one_left_out) == pytest.approx(sum(everywhere))
+    alone = [view if i == 1 else without_wrist(view) for i, view in enumerate(views)]
     assert weights(alone, 'left_wrist') == [views[1].keypoints['left_wrist'][2]]

@@ -11,10 +11,10 @@ own parameters with the rest fixed, minimising its own objective (weights: setti
     silhouette. It sees what the labelled parts cannot: the arms, and the torso's turn about the spine
     from the widths of shoulders and hips;
   - the reprojection distance of the joints that the features located in 2D (root, neck, head,
-    elbows, wrists, knees, ankles), robust (keypoint_scale) and weighted by confidence, a joint's weight
-    the same whether every view kept its keypoint or only some (keypoint_targets) (the paper uses
-    these keypoints for initialisation; the arms have no labelled contour, so for them the skin
-    keypoints are evidence too, as in paper 000 Sec. 3.2);
+    elbows, wrists, knees, ankles), robust (keypoint_scale), weighted by confidence and made up for the
+    views that left a keypoint out (keypoint_targets). The paper uses these keypoints for
+    initialisation; the arms have no labelled contour, so for them the skin keypoints are evidence too,
+    as in paper 000 Sec. 3.2;
   - priors: smoothness towards the stage's start (25 fps) and joint limits.
 Nelder–Mead (Lagarias et al. 1998): SciPy's with its standard coefficients, which are the paper's
 (Eq. 7: ρ = 1, χ = 2, γ = 0.5, σ = 0.5; non-adaptive), stopped by the simplex size (xatol) alone;
