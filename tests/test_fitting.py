@@ -9,7 +9,7 @@ from mvpose_nodes.body.model import JOINT_NAMES
 from mvpose_nodes.body.camera import studio_rig
 from mvpose_nodes.body.kinematics import lengths_of
 from mvpose_nodes.fitting.fitter import SkeletonFitter, View
-from mvpose_nodes.fitting.initialisation import upright
+from mvpose_nodes.fitting.initialisation import stature, upright
 from mvpose_nodes.fitting.settings import FitterSettings
 from mvpose_nodes.fitting.stage_search import KEYPOINT_JOINT
 
@@ -235,6 +235,31 @@ def test_the_person_is_measured_on_the_upright_frame_sets(cmu_walk):
     true_lengths = lengths_of(motion.joints)
     assert first['spine'] < 0.9 * true_lengths['spine']
     assert abs(started_crouched.lengths['spine'] / true_lengths['spine'] - 1) < 0.1
+
+
+def test_a_person_seen_seated_first_is_measured_again_once_standing(cmu_walk):
+    """Seated, a person's silhouette centroid (the root keypoint) sits near a standing pelvis's share of the
+    head's height, so `upright` takes them for a shorter person standing (the suite's seed 1 case 4: measured
+    1.32 m seated, 1.68 m tall). Here 12 frame sets of the walk at 0.8 of its height, 8 rising to 0.95, then
+    length_frames at full height: the measurements within stature_spread of the tallest count towards
+    length_frames, not the shorter ones, so the lengths end those of the person measured standing only
+    (within 1 %). Had every measurement counted, the seated and rising ones would have used up length_frames
+    before the person stood at full height (the stature 0.95 of it)."""
+    motion = cmu_walk.placed()
+    names = ('pelvis', 'neck', 'head', 'left_knee', 'right_knee', 'left_ankle', 'right_ankle')
+    heights = [0.8] * 12 + list(np.linspace(0.82, 0.95, 8)) + [1.0] * FitterSettings().length_frames
+
+    def triangulated(frame, height):
+        return {name: motion.joints[frame][JOINT_NAMES.index(name)] * [1.0, 1.0, height] for name in names}
+
+    seated_first, standing_only = SkeletonFitter(), SkeletonFitter()
+    for frame, height in enumerate(heights):
+        seated_first.measure(triangulated(frame, height))
+        if height == 1.0:
+            standing_only.measure(triangulated(frame, height))
+    assert upright_joints(motion.joints[0] * [1.0, 1.0, 0.8])
+    assert stature(seated_first.lengths) == pytest.approx(stature(standing_only.lengths), rel=0.01)
+    assert seated_first.lengths == pytest.approx(standing_only.lengths, rel=0.01)
 
 
 @pytest.mark.parametrize('drop', [0.05, 0.13])

@@ -43,8 +43,9 @@ from mvpose_nodes.body.model import JOINT_INDEX, LABEL_TORSO, PARAMETER_INDEX, S
 from mvpose_nodes.fitting.compiled import MAP_LABELS, nearest_capsules, pack_frame
 from mvpose_nodes.fitting.hypotheses import (PERIODIC_PROBE, RELABELLINGS, START_LABELLINGS, Track, feet_outside,
                                              relabelled_joints, relabelled_stages)
-from mvpose_nodes.fitting.initialisation import (completed_joints, consistent_evidence, facing_right, labelled_joints,
-                                                 person_lengths, stature, triangulated_joints, upright)
+from mvpose_nodes.fitting.initialisation import (
+    completed_joints, consistent_evidence, facing_right, labelled_joints, person_lengths, stature, tallest_measurements,
+    triangulated_joints, upright)
 from mvpose_nodes.fitting.limb_sides import LimbTracks, exchanged_pairs, oriented_view
 from mvpose_nodes.fitting.limb_starts import limb_start_joints
 from mvpose_nodes.fitting.objective import EDGE_PX, MapArena, boundary_distances, map_floats, outline_of
@@ -389,17 +390,18 @@ class SkeletonFitter:
 
     def measure(self, joints):
         """Measure the person on triangulated joints {name: (3,) [m]} if they stand upright
-        (initialisation.upright) and fewer than length_frames frame sets have measured them: the bone
-        lengths become the median of the measurements (initialisation.person_lengths) whose stature is
-        within stature_spread of the tallest, as knees bend while walking and a crouch shortens; so
-        neither a first frame set crouched, sitting or with raised arms nor one rough triangulation
-        sets them. Once there is a fit, the legs are measured from its pelvis's height (the torso fitted to
-        the views' outlines), not from the root keypoint's: that is the silhouettes' centroid, which lies
-        7-112 mm below the pelvis for the suite's CMU walkers and up to 270 mm above it with the arms raised
-        (session 29), and the legs measured from it were as much too short or too long. Upright is either
-        pelvis's verdict: the fit's alone would never measure again after a start crouched (its short
-        lengths keep the fits low), the root's alone not the person whose centroid sits far off."""
-        if self.measurements is None or len(self.measurements) >= self.settings.length_frames:
+        (initialisation.upright) and fewer than length_frames measurements are within stature_spread of the
+        tallest: the bone lengths become their median (initialisation.tallest_measurements), as knees bend
+        while walking and a crouch shortens; so neither a first frame set crouched, sitting or with raised
+        arms nor one rough triangulation sets them, and a person seen seated first (a seated silhouette's
+        centroid passes `upright`) is measured again once standing. Once there is a fit, the legs are
+        measured from its pelvis's height (the torso fitted to the views' outlines), not from the root
+        keypoint's: that is the silhouettes' centroid, 7-112 mm below the pelvis for the suite's CMU walkers,
+        up to 270 mm above it with the arms raised (session 29), and the legs measured from it as much too
+        short or too long. Upright is either pelvis's verdict: the fit's alone would never measure again after
+        a start crouched (its short lengths keep the fits low), the root's alone not one whose centroid is off."""
+        spread, enough = self.settings.stature_spread, self.settings.length_frames
+        if self.measurements is None or len(tallest_measurements(self.measurements, spread)) >= enough:
             return
         measured = joints
         if self.given is not None:
@@ -408,8 +410,7 @@ class SkeletonFitter:
         if not (upright(measured, self.settings) or upright(joints, self.settings)):
             return
         self.measurements.append(person_lengths(measured, self.settings))
-        tallest = max(stature(m) for m in self.measurements)
-        standing = [m for m in self.measurements if stature(m) >= (1 - self.settings.stature_spread) * tallest]
+        standing = tallest_measurements(self.measurements, spread)
         self.lengths = {key: float(np.median([m[key] for m in standing])) for key in standing[0]}
         self.stages = StageSearch(self.settings, self.lengths)
 

@@ -182,6 +182,15 @@ def stature(lengths):
     return lengths['spine'] / LENGTH_FRACTIONS['spine']
 
 
+def tallest_measurements(measurements, spread):
+    """The bone lengths {key: [m]} among `measurements` (person_lengths, a list) whose stature is within the share
+    `spread` of the tallest's (settings.stature_spread); [] for none."""
+    if not measurements:
+        return []
+    tallest = max(stature(m) for m in measurements)
+    return [m for m in measurements if stature(m) >= (1 - spread) * tallest]
+
+
 def person_lengths(joints, settings):
     """Bone lengths of the person in triangulated joints {name: (3,) [m]} (a first frame set, or an upright
     one: SkeletonFitter.measure): the template scaled to the height (the head's above the world frame's

@@ -62,7 +62,7 @@ class FitterSettings:
         0.35, "measured bone lengths within this share of the template's are believed", 0.0, 1.0)
     length_frames: int = setting(
         20, 'the bone lengths are the median of the measurements on up to this many upright frame sets '
-            '(initialisation.upright)', 1, 10000)
+            '(initialisation.upright) within stature_spread of the tallest measured', 1, 10000)
     upright_tilt_deg: float = setting(
         20.0, '[deg] a frame set measures the person only if the pelvis-neck line leans less than this', 0.0, 90.0)
     upright_pelvis: float = setting(
