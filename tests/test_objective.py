@@ -215,6 +215,32 @@ def test_best_assignment_undoes_per_view_left_right_swaps():
         assert right_estimate == pytest.approx(right, abs=0.005)
 
 
+def test_best_assignments_of_several_pairs_are_each_pairs_own():
+    """Pairs solved together (one triangulation call for all their labellings, as triangulated_joints does)
+    give each pair what best_assignment gives it alone, to the bit; a pair seen in one view only gives None."""
+    from mvpose_nodes.body.triangulation import Rig, best_assignments
+    rng = np.random.default_rng(5)
+    cameras = [RIG[1], RIG[3], RIG[6]]
+    rig = Rig.of(cameras)
+    pixels = np.empty((4, 3, 2, 2))
+    for pair, centre in enumerate(random_points(rng, 4)):
+        ends = [observe(cameras, centre + offset) for offset in ([0.12, 0, 0], [-0.12, 0, 0])]
+        swaps = rng.random(3) < 0.5
+        pixels[pair, :, 0] = np.where(swaps[:, None], ends[1], ends[0]) + rng.normal(0, 2.0, (3, 2))
+        pixels[pair, :, 1] = np.where(swaps[:, None], ends[0], ends[1]) + rng.normal(0, 2.0, (3, 2))
+    pixels[3, 1:] = np.nan   # the last pair seen by the first camera only
+    weights = rng.uniform(0.3, 1.0, (4, 3, 2))
+    normalized = np.stack([rig.normalized(pixels[pair]) for pair in range(4)])
+    together = best_assignments(rig, pixels, weights, normalized)
+    for pair in range(4):
+        alone = best_assignment(cameras, pixels[pair, :, 0], pixels[pair, :, 1], weights[pair], rig, normalized[pair])
+        if pair == 3:
+            assert alone is None and together[pair] is None
+            continue
+        for mine, theirs in zip(together[pair], alone):
+            assert np.array_equal(mine, theirs)
+
+
 # The outline objective (objective.outline_cost): capsules explaining a silhouette's outline.
 
 CAPSULE = ((150.0, 120.0), (420.0, 300.0))  # a limb's axis [px] in a 640 × 480 image

@@ -132,16 +132,30 @@ def best_assignment(cameras, left_pixels, right_pixels, weights=None, rig=None, 
     weights = np.ones((count, 2)) if weights is None else np.asarray(weights, dtype=float)
     if normalized is None:
         normalized = rig.normalized(pixels)
+    return best_assignments(rig, pixels[None], weights[None], np.asarray(normalized, float)[None])[0]
+
+
+def best_assignments(rig, pixels, weights, normalized):
+    """best_assignment of P pairs at once (one triangulate_many call for all their combinations): pixels
+    (P, C, 2 labels, 2) [px], weights (P, C, 2), normalized (P, C, 2, 2) their Rig.normalized coordinates.
+    Returns a list of P results, each (left, right, swaps) or None, as best_assignment's."""
+    pairs, count = pixels.shape[:2]
     swaps = np.array([(False, *tail) for tail in itertools.product((False, True), repeat=count - 1)])  # (S, C)
     # Which labelled observation each view gives the pair's first and second point: (2 S, C).
     chosen = np.concatenate([swaps, ~swaps]).astype(int)
     views = np.arange(count)
-    points, squared, used = triangulate_many(rig, pixels[views, chosen], weights[views, chosen],
-                                             normalized[views, chosen])
+    points, squared, used = triangulate_many(rig, pixels[:, views, chosen].reshape(-1, count, 2),
+                                             weights[:, views, chosen].reshape(-1, count),
+                                             normalized[:, views, chosen].reshape(-1, count, 2))
+    points = points.reshape(pairs, 2 * len(swaps), 3)
     # Every observation feeds exactly one of the two points, so the totals compare like with like.
-    error = squared.sum(axis=1).reshape(2, -1).sum(axis=0)
-    valid = (used.reshape(2, -1) >= 2).all(axis=0)
-    if not valid.any():
-        return None
-    best = int(np.flatnonzero(valid)[np.argmin(error[valid])])
-    return points[best], points[len(swaps) + best], swaps[best]
+    errors = squared.sum(axis=1).reshape(pairs, 2, -1).sum(axis=1)
+    valid = (used.reshape(pairs, 2, -1) >= 2).all(axis=1)
+    results = []
+    for pair in range(pairs):
+        if not valid[pair].any():
+            results.append(None)
+            continue
+        best = int(np.flatnonzero(valid[pair])[np.argmin(errors[pair][valid[pair]])])
+        results.append((points[pair, best], points[pair, len(swaps) + best], swaps[best]))
+    return results

@@ -14,7 +14,7 @@ import numpy as np
 
 from mvpose_nodes.body.kinematics import LENGTH_FRACTIONS, bone_lengths, forward_kinematics
 from mvpose_nodes.body.model import JOINT_INDEX, PARAMETER_INDEX, PARAMETER_NAMES
-from mvpose_nodes.body.triangulation import Rig, best_assignment, rms_of, triangulate_many, usable
+from mvpose_nodes.body.triangulation import Rig, best_assignments, rms_of, triangulate_many, usable
 from mvpose_nodes.fitting.stage_search import KEYPOINT_JOINT, stage_indices
 
 PAIRED_LIMBS = ('knee', 'ankle', 'elbow', 'wrist')   # keypoints that come as a left/right pair
@@ -76,16 +76,21 @@ def triangulated_joints(views, settings):
     if not found.all():
         return None
     joints = {KEYPOINT_JOINT.get(name, name): point for name, point in zip(TRIANGULATED, points)}
-    for index, limb in enumerate(PAIRED_LIMBS):
-        left = len(TRIANGULATED) + 2 * index   # the pair's columns: left, left + 1 (right)
-        assigned = best_assignment(rig.cameras, pixels[:, left], pixels[:, left + 1], weights[:, left:left + 2],
-                                   rig, normalized[:, left:left + 2])
-        if assigned is None:
-            continue
+    # The pairs' columns: left, left + 1 (right); every pair's labellings across the views solved together.
+    lefts = len(TRIANGULATED) + 2 * np.arange(len(PAIRED_LIMBS))
+    pair_columns = np.stack([lefts, lefts + 1], axis=1)   # (pairs, 2)
+    assignments = best_assignments(rig, pixels[:, pair_columns].swapaxes(0, 1), weights[:, pair_columns].swapaxes(0, 1),
+                                   normalized[:, pair_columns].swapaxes(0, 1))
+    assigned = [(limb, left, result[2]) for limb, left, result in zip(PAIRED_LIMBS, lefts, assignments)
+                if result is not None]
+    if assigned:
         # Each point's observation in each view: the view's own labels, or the other's where it was swapped.
-        pair_points, pair_found = robust(left + np.column_stack([assigned[2], ~assigned[2]]).astype(int))
-        if pair_found.all():
-            joints[f'left_{limb}'], joints[f'right_{limb}'] = pair_points
+        columns = np.concatenate([left + np.column_stack([swaps, ~swaps]).astype(int) for _, left, swaps in assigned],
+                                 axis=1)
+        pair_points, pair_found = robust(columns)
+        for index, (limb, _, _) in enumerate(assigned):
+            if pair_found[2 * index:2 * index + 2].all():
+                joints[f'left_{limb}'], joints[f'right_{limb}'] = pair_points[2 * index:2 * index + 2]
     return joints
 
 
