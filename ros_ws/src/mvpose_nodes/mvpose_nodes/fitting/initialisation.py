@@ -79,8 +79,8 @@ def triangulated_joints(views, settings):
     # The pairs' columns: left, left + 1 (right); every pair's labellings across the views solved together.
     lefts = len(TRIANGULATED) + 2 * np.arange(len(PAIRED_LIMBS))
     pair_columns = np.stack([lefts, lefts + 1], axis=1)   # (pairs, 2)
-    assignments = best_assignments(rig, pixels[:, pair_columns].swapaxes(0, 1), weights[:, pair_columns].swapaxes(0, 1),
-                                   normalized[:, pair_columns].swapaxes(0, 1))
+    by_pair = (values[:, pair_columns].swapaxes(0, 1) for values in (pixels, weights, normalized))   # (pairs, C, 2, ...)
+    assignments = best_assignments(rig, *by_pair)
     assigned = [(limb, left, result[2]) for limb, left, result in zip(PAIRED_LIMBS, lefts, assignments)
                 if result is not None]
     if assigned:
