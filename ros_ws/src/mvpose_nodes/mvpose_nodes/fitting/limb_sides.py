@@ -11,9 +11,14 @@ from dataclasses import replace
 import numpy as np
 
 from mvpose_nodes.body.model import JOINT_INDEX, LABEL_LEFT_LEG, LABEL_RIGHT_LEG
+from mvpose_nodes.fitting.objective import segment_points
 
 SWAPPABLE = {'legs': ('knee', 'ankle'), 'arms': ('elbow', 'wrist')}
 ACROSS_ROOT = {'knee': 'hip', 'ankle': 'hip', 'elbow': 'shoulder', 'wrist': 'shoulder'}   # where each limb starts
+# Each leg's bones (thigh, shin) as joint chains, and the points per bone that say which labelled leg it lies on.
+LEG_CHAINS = {LABEL_LEFT_LEG: ('left_hip', 'left_knee', 'left_ankle'),
+              LABEL_RIGHT_LEG: ('right_hip', 'right_knee', 'right_ankle')}
+LEG_SIDE_POINTS = 20
 
 
 def exchange(joints, name):
@@ -104,6 +109,8 @@ def oriented_view(view, joints):
         # reference's projected joints of the same side and of the other.
         seen = [f'{side}_{n}' for n in names for side in ('left', 'right') if f'{side}_{n}' in keypoints]
         if not seen:
+            if group == 'legs' and distances is not None and legs_on_other_labels(distances, view.camera, joints):
+                distances = distances.swapped(LABEL_LEFT_LEG, LABEL_RIGHT_LEG)
             continue
         other_side = [name.replace('left_', 'RIGHT_').replace('right_', 'left_').replace('RIGHT_', 'right_')
                       for name in seen]
@@ -121,6 +128,29 @@ def oriented_view(view, joints):
             if group == 'legs' and distances is not None:
                 distances = distances.swapped(LABEL_LEFT_LEG, LABEL_RIGHT_LEG)
     return replace(view, distances=distances, keypoints=keypoints)
+
+
+def legs_on_other_labels(distances, camera, joints):
+    """Whether the legs of `joints` (15, 3) [m], projected by `camera`, lie nearer the view's labelled leg
+    boundaries (objective.BoundaryDistances) the other way round: Σ over the thighs' and shins' points of
+    the distances to both sides of the other leg's part below that to their own. For a view without leg
+    keypoints whose legs are still labelled: the image cutting the person off leaves the knees and ankles out
+    (fitter.view_from_features) after the contour was labelled by them, from a front or back the face only
+    guessed (vision.features), so the keypoints cannot orient its labels. False when a leg's part lacks a
+    side or the legs lie behind the camera."""
+    if any(label not in distances.widths for label in LEG_CHAINS):
+        return False
+    pixels, depths = camera.project(joints[[JOINT_INDEX[name] for chain in LEG_CHAINS.values() for name in chain]])
+    if np.any(depths <= 0):
+        return False
+    nearness = {}
+    for (label, chain), start in zip(LEG_CHAINS.items(), (0, len(LEG_CHAINS[LABEL_LEFT_LEG]))):
+        points = np.vstack([segment_points(pixels[start + bone], pixels[start + bone + 1], LEG_SIDE_POINTS)
+                            for bone in range(len(chain) - 1)])
+        nearness[label] = {part: float(np.sum(distances.both_sides(part, points))) for part in LEG_CHAINS}
+    own = nearness[LABEL_LEFT_LEG][LABEL_LEFT_LEG] + nearness[LABEL_RIGHT_LEG][LABEL_RIGHT_LEG]
+    other = nearness[LABEL_LEFT_LEG][LABEL_RIGHT_LEG] + nearness[LABEL_RIGHT_LEG][LABEL_LEFT_LEG]
+    return other < own
 
 
 def exchanged_pairs(joints, names):
