@@ -41,8 +41,8 @@ from mvpose_nodes.body.camera import intrinsics, look_at
 from mvpose_nodes.body.kinematics import BONES, bone_lengths, forward_kinematics, inverse_kinematics
 from mvpose_nodes.body.model import JOINT_INDEX, LABEL_TORSO, PARAMETER_INDEX, STAGE_NAMES
 from mvpose_nodes.fitting.compiled import MAP_LABELS, nearest_capsules, pack_frame
-from mvpose_nodes.fitting.hypotheses import (PERIODIC_PROBE, RELABELLINGS, START_LABELLINGS, Track, feet_outside,
-                                             relabelled_joints, relabelled_stages)
+from mvpose_nodes.fitting.hypotheses import (PERIODIC_PROBE, RELABELLINGS, START_LABELLINGS, Track, face_away,
+                                             feet_outside, relabelled_joints, relabelled_stages)
 from mvpose_nodes.fitting.initialisation import (
     completed_joints, consistent_evidence, facing_right, labelled_joints, person_lengths, stature, tallest_measurements,
     triangulated_joints, upright)
@@ -289,17 +289,16 @@ class SkeletonFitter:
     def cost_of(self, parameters, views):
         """How well the pose `parameters` (29,) explains the views: the six stages' objectives (without the
         smoothness prior, with the joint limits) with each view's left/right labels oriented to the pose
-        and the outline assigned from it; raised by face_cost_share when the pose's hips face away from the
-        face the views see (face_right), and by foot_weight per px² of its feet outside the silhouettes
-        (hypotheses.feet_outside)."""
+        and the outline assigned from it; raised by up to face_cost_share as far as the pose's hips face away
+        from the face the views see (face_right; hypotheses.face_away), and by foot_weight per px² of its feet
+        outside the silhouettes (hypotheses.feet_outside)."""
         joints, frames = forward_kinematics(parameters, self.stages.lengths)
         oriented = [oriented_view(view, joints) for view in views]
         frame = pack_frame(oriented)
         nearest = self.stages.outline_nearest(parameters, oriented, joints)
         cost = sum(self.stages.posed_cost(stage, parameters, oriented, frame, nearest, frames) for stage in STAGE_NAMES)
-        hips = joints[JOINT_INDEX['right_hip']] - joints[JOINT_INDEX['left_hip']]
-        if self.face_right is not None and np.dot(hips, self.face_right) < 0:
-            cost *= 1 + self.settings.face_cost_share
+        if self.face_right is not None:
+            cost *= 1 + self.settings.face_cost_share * face_away(joints, self.face_right)
         if self.settings.foot_weight:
             cost += self.settings.foot_weight * feet_outside(views, joints, stature(self.lengths),
                                                              self.settings.ankle_height)

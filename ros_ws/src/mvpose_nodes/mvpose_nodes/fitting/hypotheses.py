@@ -112,6 +112,17 @@ def relabelled_joints(found, pairs):
     return found
 
 
+def face_away(joints, face_right):
+    """How far the hips of `joints` (15, 3) [m] face away from the face the views see: max(0, −cos θ) of the
+    angle θ between the hips' right (right hip − left hip) and `face_right` (unit, initialisation.facing_right),
+    0 for a pose facing the face's way or side on to it, 1 for one facing straight away. Graded, not all or
+    nothing: the face's direction is the frontness-weighted mean of a few cameras' directions (in the suite's
+    seed 7 case 9 it lay 70-80° from the true right), and a pose whose hips were 20° off the truth's was taken
+    as facing away and charged in full, so the body turned round was kept for 20 frame sets."""
+    hips = joints[JOINT_INDEX['right_hip']] - joints[JOINT_INDEX['left_hip']]
+    return max(0.0, -float(np.dot(hips, face_right)) / max(float(np.linalg.norm(hips)), 1e-9))
+
+
 def feet_outside(views, joints, stature, ankle_height):
     """Σ over the views with an outline (fitter.View) and the feet on the floor (STANCE_HEIGHT) of the
     squared distance [px²] (each capped at FOOT_CAP_PX) outside the silhouette of a point of the foot:

@@ -100,8 +100,9 @@ class FitterSettings:
         0.25, "[m] the fit's ankles nearer than this have passed each other (a stride, where continuity is least "
               'sure which leg is which): once they part, the legs exchanged are followed beside the fit', 0.0, 2.0)
     face_cost_share: float = setting(
-        0.2, "a labelling whose hips face away from the face the views see (initialisation.facing_right) has its "
-             "fit's cost raised by this share when labellings are compared (0: the face is not asked)", 0.0, 100.0)
+        0.2, "a labelling whose hips face straight away from the face the views see (initialisation.facing_right) has "
+             "its fit's cost raised by this share when labellings are compared, one side on to it not at all "
+             "(hypotheses.face_away; 0: the face is not asked)", 0.0, 100.0)
     foot_weight: float = setting(
         1.0, 'per px² of a point of a foot, ahead of the ankle where the hips face, outside the silhouette, added to '
              "a labelling's cost when labellings are compared (hypotheses.feet_outside; 0: the feet are not asked)",
