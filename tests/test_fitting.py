@@ -212,8 +212,8 @@ def test_the_person_is_measured_on_the_upright_frame_sets(cmu_walk):
     """A start crouched (upper body 0.3 m lower, knees bent) measures the person too small; the lengths
     then come from the frame sets where they stand at full height, as an upright start gives them (the legs
     within 1 %: they are measured from the fits' pelvis, and these fits began with other lengths).
-    Sitting (0.45 m lower) and hands raised over the head (its keypoint 0.35 m higher) measure nothing
-    (initialisation.upright)."""
+    Sitting (0.45 m lower), hands raised over the head (its keypoint 0.35 m higher) and both feet off the
+    floor measure nothing (initialisation.upright)."""
     motion = cmu_walk.placed()
     cameras = studio_rig(cameras=[3, 5, 7])
     upper_body = [JOINT_NAMES.index(name) for name in JOINT_NAMES if 'knee' not in name and 'ankle' not in name]
@@ -225,6 +225,10 @@ def test_the_person_is_measured_on_the_upright_frame_sets(cmu_walk):
     hands_raised[JOINT_NAMES.index('head')] += [0, 0, 0.35]
     assert all(upright_joints(joints) for joints in motion.joints[:11])
     assert not upright_joints(sitting) and not upright_joints(hands_raised)
+    # In a run's or a hop's flight (no foot on the floor) the head is above the stature and the pelvis above
+    # its standing height: the same walker lifted 0.1 m measures nothing, lifted 0.03 m (a shoe's sole) still does.
+    assert not any(upright_joints(joints + [0, 0, 0.1]) for joints in motion.joints[:11])
+    assert all(upright_joints(joints + [0, 0, 0.03]) for joints in motion.joints[:11])
     started_crouched, started_upright = SkeletonFitter(), SkeletonFitter()
     started_crouched.fit(0.0, exact_views(cameras, crouched))
     first = dict(started_crouched.lengths)
