@@ -393,7 +393,8 @@ def test_a_cut_off_views_legs_are_oriented_by_where_the_poses_legs_lie():
     for side, x in (('left', 0.12), ('right', -0.12)):   # the person's left at world +x: image right here
         for name, z in (('hip', 0.9), ('knee', 0.5), ('ankle', -0.1)):   # the ankles below the image's edge
             joints[JOINT_INDEX[f'{side}_{name}']] = (x, 0.0, z)
-    (image_left_x, _), (image_right_x, _) = camera.project(joints[[JOINT_INDEX['right_hip'], JOINT_INDEX['left_hip']]])[0]
+    hips, _ = camera.project(joints[[JOINT_INDEX['right_hip'], JOINT_INDEX['left_hip']]])
+    (image_left_x, _), (image_right_x, _) = hips
     top = int(camera.project(joints[[JOINT_INDEX['left_hip']]])[0][0, 1])
     points, labels, sides = [], [], []
     # Labelled as from the front (the image-left leg the person's right) would be right here; from the back

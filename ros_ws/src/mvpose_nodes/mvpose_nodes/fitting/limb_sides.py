@@ -15,7 +15,8 @@ from mvpose_nodes.fitting.objective import segment_points
 
 SWAPPABLE = {'legs': ('knee', 'ankle'), 'arms': ('elbow', 'wrist')}
 ACROSS_ROOT = {'knee': 'hip', 'ankle': 'hip', 'elbow': 'shoulder', 'wrist': 'shoulder'}   # where each limb starts
-# Each leg's bones (thigh, shin) as joint chains, and the points per bone that say which labelled leg it lies on.
+# Each leg's joints from the hip down (its thigh and shin), and the points per bone that say which labelled
+# leg's part it lies on (legs_on_other_labels).
 LEG_CHAINS = {LABEL_LEFT_LEG: ('left_hip', 'left_knee', 'left_ankle'),
               LABEL_RIGHT_LEG: ('right_hip', 'right_knee', 'right_ankle')}
 LEG_SIDE_POINTS = 20
@@ -140,13 +141,12 @@ def legs_on_other_labels(distances, camera, joints):
     side or the legs lie behind the camera."""
     if any(label not in distances.widths for label in LEG_CHAINS):
         return False
-    pixels, depths = camera.project(joints[[JOINT_INDEX[name] for chain in LEG_CHAINS.values() for name in chain]])
-    if np.any(depths <= 0):
-        return False
     nearness = {}
-    for (label, chain), start in zip(LEG_CHAINS.items(), (0, len(LEG_CHAINS[LABEL_LEFT_LEG]))):
-        points = np.vstack([segment_points(pixels[start + bone], pixels[start + bone + 1], LEG_SIDE_POINTS)
-                            for bone in range(len(chain) - 1)])
+    for label, chain in LEG_CHAINS.items():
+        pixels, depths = camera.project(joints[[JOINT_INDEX[name] for name in chain]])
+        if np.any(depths <= 0):
+            return False
+        points = np.vstack([segment_points(a, b, LEG_SIDE_POINTS) for a, b in zip(pixels[:-1], pixels[1:])])
         nearness[label] = {part: float(np.sum(distances.both_sides(part, points))) for part in LEG_CHAINS}
     own = nearness[LABEL_LEFT_LEG][LABEL_LEFT_LEG] + nearness[LABEL_RIGHT_LEG][LABEL_RIGHT_LEG]
     other = nearness[LABEL_LEFT_LEG][LABEL_RIGHT_LEG] + nearness[LABEL_RIGHT_LEG][LABEL_LEFT_LEG]
