@@ -26,8 +26,10 @@ def test_bench_runs_every_frame_set_through_the_graph(synth_bag):
     assert '4 of 4 fitted, none dropped' in table
     rate = float(re.search(r'end-to-end\s+([\d.]+) frame sets/s', table).group(1))
     assert rate > 0
+    # Sync wait is the skeleton's arrival less the fit's own time less the last contour's arrival here: negative
+    # when this process took that contour later than the fitter did (a loaded machine), so its sign is free.
     for stage in ('decode', 'features', 'sync wait', 'fit', 'end to end'):
-        assert re.search(rf'^    {stage}\s+\d+\.\d\s+\d+\.\d', table, re.MULTILINE), stage
+        assert re.search(rf'^    {stage}\s+-?\d+\.\d\s+-?\d+\.\d', table, re.MULTILINE), stage
     for node in ('/cam3/camera_features', '/cam5/camera_features', '/cam7/camera_features', 'skeleton_fitter'):
         row = re.search(rf'^    {re.escape(node)}\s+([\d.]+)\s+(\d+)\s+(\d+)$', table, re.MULTILINE)
         assert row, f'{node} row missing:\n{table}'
