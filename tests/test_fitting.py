@@ -396,14 +396,13 @@ def test_a_cut_off_views_legs_are_oriented_by_where_the_poses_legs_lie():
     hips, _ = camera.project(joints[[JOINT_INDEX['right_hip'], JOINT_INDEX['left_hip']]])
     (image_left_x, _), (image_right_x, _) = hips
     top = int(camera.project(joints[[JOINT_INDEX['left_hip']]])[0][0, 1])
-    points, labels, sides = [], [], []
     # Labelled as from the front (the image-left leg the person's right) would be right here; from the back
     # the image-left leg is the person's left: that labelling, with this front view's pose, is the wrong way round.
-    for centre, label in ((image_left_x, LABEL_LEFT_LEG), (image_right_x, LABEL_RIGHT_LEG)):
-        for x, side in ((int(centre) - 8, SIDE_A), (int(centre) + 8, SIDE_B)):
-            for y in range(top, size):
-                points.append((x, y)), labels.append(label), sides.append(side)
-    contour = ContourLabels(np.array(points, np.int32), np.array(labels, np.uint8), np.array(sides, np.uint8))
+    legs = ((image_left_x, LABEL_LEFT_LEG), (image_right_x, LABEL_RIGHT_LEG))
+    pixels = [(x, y, label, side) for centre, label in legs
+              for x, side in ((int(centre) - 8, SIDE_A), (int(centre) + 8, SIDE_B)) for y in range(top, size)]
+    x, y, labels, sides = np.array(pixels).T
+    contour = ContourLabels(np.column_stack([x, y]).astype(np.int32), labels.astype(np.uint8), sides.astype(np.uint8))
     keypoints = {'root': (size / 2, top, 1.0), 'left_ankle': (image_left_x, size - 1.0, 1.0),
                  'right_ankle': (image_right_x, size - 1.0, 1.0)}
     view = view_from_features(camera, keypoints, contour)
