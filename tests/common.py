@@ -96,8 +96,13 @@ class Background:
             os.killpg(self.process.pid, signal.SIGINT)
         return self.finish(timeout)
 
-    def kill(self, grace=10):
-        """Ctrl-C first (a launch then stops its nodes, which run in sessions of their own), then SIGKILL."""
+    def kill(self, grace=None):
+        """Ctrl-C first (a launch then stops its nodes, which run in sessions of their own), then SIGKILL after
+        `grace` [s]; by default longer than a launch's own escalation (SIGINT, SIGTERM, then SIGKILL to a node
+        still running): a launcher killed as it is about to kill a node slow to stop left that node running."""
+        if grace is None:
+            from mvpose_nodes.tools.launch import SIGINT_TIMEOUT, SIGTERM_TIMEOUT
+            grace = SIGINT_TIMEOUT + SIGTERM_TIMEOUT + 5.0
         if self.process.poll() is None:
             os.killpg(self.process.pid, signal.SIGINT)
             try:

@@ -75,6 +75,8 @@ EXIT_REQUIRED_ENDED = 100  # + the 1-based position of the required process
 EXIT_INTERRUPTED = 130
 POLL_INTERVAL = 0.05  # seconds between looks at the children: short enough that reactions feel immediate
 DRAIN_TIMEOUT = 1.0  # a grandchild may hold an ended child's output pipe open; don't wait for it for ever
+SIGINT_TIMEOUT = 5.0  # [s] the defaults of --sigint-timeout and --sigterm-timeout (ros2 launch's)
+SIGTERM_TIMEOUT = 5.0
 
 
 class Launch:
@@ -88,7 +90,7 @@ class Launch:
     so call it, or stop(), rather than just sleeping. Exit codes are those of the launch command.
     """
 
-    def __init__(self, specs, sigint_timeout=5.0, sigterm_timeout=5.0, output=None):
+    def __init__(self, specs, sigint_timeout=SIGINT_TIMEOUT, sigterm_timeout=SIGTERM_TIMEOUT, output=None):
         """output: a text file for the children's and the launch's lines (default: standard output)."""
         self.specs = list(specs)
         self.output = output
@@ -247,10 +249,10 @@ def build_parser(prog):
                         help='print the command line of every process and exit without starting any')
     parser.add_argument('-s', '--show-args', action='store_true',
                         help="print the launch file's arguments (name, description, default) and exit")
-    parser.add_argument('--sigint-timeout', type=seconds, default=5.0, metavar='S',
-                        help='seconds to wait after SIGINT before sending SIGTERM (default 5)')
-    parser.add_argument('--sigterm-timeout', type=seconds, default=5.0, metavar='S',
-                        help='seconds to wait after SIGTERM before sending SIGKILL (default 5)')
+    parser.add_argument('--sigint-timeout', type=seconds, default=SIGINT_TIMEOUT, metavar='S',
+                        help=f'seconds to wait after SIGINT before sending SIGTERM (default {SIGINT_TIMEOUT:g})')
+    parser.add_argument('--sigterm-timeout', type=seconds, default=SIGTERM_TIMEOUT, metavar='S',
+                        help=f'seconds to wait after SIGTERM before sending SIGKILL (default {SIGTERM_TIMEOUT:g})')
     return parser
 
 
