@@ -123,6 +123,12 @@ def face_away(joints, face_right):
     return max(0.0, -float(np.dot(hips, face_right)) / max(float(np.linalg.norm(hips)), 1e-9))
 
 
+def on_the_floor(heights, stature, ankle_height):
+    """Whether ankles at `heights` [m] above the floor (a number or an array) stand on it: within STANCE_HEIGHT
+    of the stature [m] of an ankle's height standing (ankle_height, a share of the stature)."""
+    return np.asarray(heights) <= (ankle_height + STANCE_HEIGHT) * stature
+
+
 def feet_outside(views, joints, stature, ankle_height):
     """Σ over the views with an outline (fitter.View) and the feet on the floor (STANCE_HEIGHT) of the
     squared distance [px²] (each capped at FOOT_CAP_PX) outside the silhouette of a point of the foot:
@@ -138,7 +144,7 @@ def feet_outside(views, joints, stature, ankle_height):
     if length < 1e-6:   # the torso lying level, head first: the hips say nothing about the feet
         return 0.0
     ankles = joints[[JOINT_INDEX['left_ankle'], JOINT_INDEX['right_ankle']]]
-    ankles = ankles[ankles[:, 2] <= (ankle_height + STANCE_HEIGHT) * stature]
+    ankles = ankles[on_the_floor(ankles[:, 2], stature, ankle_height)]
     points = ankles + FOOT_REACH * stature * forward / length - (0.0, 0.0, 0.5 * ankle_height * stature)
     total = 0.0
     for view in views:

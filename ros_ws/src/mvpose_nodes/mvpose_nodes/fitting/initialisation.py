@@ -15,7 +15,7 @@ import numpy as np
 from mvpose_nodes.body.kinematics import LENGTH_FRACTIONS, bone_lengths, forward_kinematics
 from mvpose_nodes.body.model import JOINT_INDEX, PARAMETER_INDEX, PARAMETER_NAMES
 from mvpose_nodes.body.triangulation import Rig, best_assignments, rms_of, triangulate_many, usable
-from mvpose_nodes.fitting.hypotheses import STANCE_HEIGHT
+from mvpose_nodes.fitting.hypotheses import on_the_floor
 from mvpose_nodes.fitting.stage_search import KEYPOINT_JOINT, stage_indices
 
 PAIRED_LIMBS = ('knee', 'ankle', 'elbow', 'wrist')   # keypoints that come as a left/right pair
@@ -171,18 +171,17 @@ def upright(joints, settings):
     the head, the posture person_lengths assumes: the pelvis-neck line within upright_tilt_deg of
     vertical, the pelvis at the template's share of the height (within upright_pelvis: not sitting or
     bent down), and the head as far from the neck, against the spine, as the template's (within
-    length_trust: not hands raised above it, which the silhouette's top then is), and a foot on the floor:
-    the lower ankle keypoint, if any, within STANCE_HEIGHT of the stature of the ankle's height standing (not
-    a run's or a hop's flight, where the head is above the stature and the pelvis above its standing height,
-    which person_lengths would take for a taller person with longer legs). Heights are above the world
-    frame's floor, z = 0 (README)."""
+    length_trust: not hands raised above it, which the silhouette's top then is), and the lower ankle
+    keypoint, if any, on the floor (hypotheses.on_the_floor; not a run's or a hop's flight, where the head is
+    above the stature and the pelvis above its standing height, which person_lengths would take for a taller
+    person with longer legs). Heights are above the world frame's floor, z = 0 (README)."""
     spine = joints['neck'] - joints['pelvis']
     tilt = np.degrees(np.arccos(np.clip(spine[2] / np.linalg.norm(spine), -1.0, 1.0)))
     height = joints['head'][2]
     standing = LENGTH_FRACTIONS['thigh'] + LENGTH_FRACTIONS['shin'] + settings.ankle_height
     head = np.linalg.norm(joints['head'] - joints['neck']) / np.linalg.norm(spine)
     ankles = [joints[n][2] for n in ('left_ankle', 'right_ankle') if n in joints]
-    on_floor = not ankles or min(ankles) <= (settings.ankle_height + STANCE_HEIGHT) * height
+    on_floor = not ankles or bool(on_the_floor(min(ankles), height, settings.ankle_height))
     return bool(tilt < settings.upright_tilt_deg and height > 0 and on_floor
                 and abs(joints['pelvis'][2] / height / standing - 1) < settings.upright_pelvis
                 and abs(head / (LENGTH_FRACTIONS['head'] / LENGTH_FRACTIONS['spine']) - 1) < settings.length_trust)

@@ -10,15 +10,17 @@ from dataclasses import replace
 
 import numpy as np
 
+from mvpose_nodes.body.kinematics import BONE_INDEX, BONES
 from mvpose_nodes.body.model import JOINT_INDEX, LABEL_LEFT_LEG, LABEL_RIGHT_LEG
 from mvpose_nodes.fitting.objective import segment_points
+from mvpose_nodes.fitting.stage_search import STAGE_BONES
 
 SWAPPABLE = {'legs': ('knee', 'ankle'), 'arms': ('elbow', 'wrist')}
 ACROSS_ROOT = {'knee': 'hip', 'ankle': 'hip', 'elbow': 'shoulder', 'wrist': 'shoulder'}   # where each limb starts
-# Each leg's joints from the hip down (its thigh and shin), and the points per bone that say which labelled
-# leg's part it lies on (legs_on_other_labels).
-LEG_CHAINS = {LABEL_LEFT_LEG: ('left_hip', 'left_knee', 'left_ankle'),
-              LABEL_RIGHT_LEG: ('right_hip', 'right_knee', 'right_ankle')}
+# The legs' labelled bones (thigh, shin) by part label, as the leg stages have them (stage_search.STAGE_BONES),
+# and the points per bone that say which labelled leg's part it lies on (legs_on_other_labels).
+LEG_BONES = {label: [name for name, _ in STAGE_BONES[stage]]
+             for stage, label in (('left_leg', LABEL_LEFT_LEG), ('right_leg', LABEL_RIGHT_LEG))}
 LEG_SIDE_POINTS = 20
 
 
@@ -139,15 +141,16 @@ def legs_on_other_labels(distances, camera, joints):
     (fitter.view_from_features) after the contour was labelled by them, from a front or back the face only
     guessed (vision.features), so the keypoints cannot orient its labels. False when a leg's part lacks a
     side or the legs lie behind the camera."""
-    if any(label not in distances.widths for label in LEG_CHAINS):
+    if any(label not in distances.widths for label in LEG_BONES):
         return False
     nearness = {}
-    for label, chain in LEG_CHAINS.items():
-        pixels, depths = camera.project(joints[[JOINT_INDEX[name] for name in chain]])
-        if np.any(depths <= 0):
+    for label, names in LEG_BONES.items():
+        bones = [BONES[BONE_INDEX[name]] for name in names]
+        segments = [camera.project(joints[[JOINT_INDEX[bone.parent_joint], JOINT_INDEX[bone.joint]]]) for bone in bones]
+        if any(np.any(depths <= 0) for _, depths in segments):
             return False
-        points = np.vstack([segment_points(a, b, LEG_SIDE_POINTS) for a, b in zip(pixels[:-1], pixels[1:])])
-        nearness[label] = {part: float(np.sum(distances.both_sides(part, points))) for part in LEG_CHAINS}
+        points = np.vstack([segment_points(*pixels, LEG_SIDE_POINTS) for pixels, _ in segments])
+        nearness[label] = {part: float(np.sum(distances.both_sides(part, points))) for part in LEG_BONES}
     own = nearness[LABEL_LEFT_LEG][LABEL_LEFT_LEG] + nearness[LABEL_RIGHT_LEG][LABEL_RIGHT_LEG]
     other = nearness[LABEL_LEFT_LEG][LABEL_RIGHT_LEG] + nearness[LABEL_RIGHT_LEG][LABEL_LEFT_LEG]
     return other < own
