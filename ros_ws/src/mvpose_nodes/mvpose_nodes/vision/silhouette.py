@@ -35,14 +35,13 @@ SHOULDER_DEPTH = (0.09, 0.22)  # ... and lies this share of the stature below th
 
 def components(mask, connectivity=8):
     """Connected components of a bool or uint8 (H, W) mask: labels int32 (H, W) (0: the background) and
-    the area of each label (n,) int64 [px]. cv2.connectedComponents and np.unique's counts (every label
-    0 … n − 1 has pixels, so they are the areas in label order): OpenCV's connectedComponentsWithStats
-    takes 7 times as long here (1.8 against 0.26 ms on a 742×386 person box, OpenCV 5.0), and its stats
-    were the largest cost of the features; np.bincount, which casts and scans the labels first, took
-    2.5 ms more per 1080p image over the pipeline's six calls. Callers take the box of the one component
-    they keep (component_box)."""
-    _, labels = cv2.connectedComponents(mask.view(np.uint8), connectivity=connectivity)
-    return labels, np.unique(labels, return_counts=True)[1]
+    the area of each label (n,) int64 [px]. cv2.connectedComponents and a bincount: OpenCV's
+    connectedComponentsWithStats takes 7 times as long here (1.8 against 0.26 ms on a 742×386 person box,
+    OpenCV 5.0), and its stats were the largest cost of the features. np.unique's counts (a sort) were
+    measured faster once (session 33) and 4 times slower on this machine since (2.0 against 0.53 ms on an
+    800×500 box; docs/method.md). Callers take the box of the one component they keep (component_box)."""
+    count, labels = cv2.connectedComponents(mask.view(np.uint8), connectivity=connectivity)
+    return labels, np.bincount(labels.ravel(), minlength=count)
 
 
 def component_box(labels, label):
