@@ -165,3 +165,37 @@ def test_nearest_capsules_equal_the_minimum_of_the_residuals():
     nearest, found = nearest_capsules(points, starts, ends, radii, terminal)
     assert np.array_equal(nearest, residuals.argmin(axis=1))
     assert np.allclose(found, residuals.min(axis=1), rtol=1e-12, atol=1e-9)
+
+
+def test_a_segment_inside_its_maps_is_read_as_point_by_point_to_the_bit():
+    """The look-ups of a segment that lies inside a part's maps, both sides at once and without clamping
+    (compiled._inside_lookups, which the objective uses when _segment_inside says so), equal _bilinear's at
+    each of its points exactly; a segment that leaves the maps, by a corner or by a thousandth of a cell, is
+    not taken for one inside."""
+    from mvpose_nodes.fitting.compiled import _bilinear, _inside_lookups, _segment_inside
+    from mvpose_nodes.fitting.objective import MAP_COARSENING
+    from mvpose_nodes.fitting.stage_search import FRACTIONS
+    rng = np.random.default_rng(11)
+    height, width = 70, 45   # on the coarse grid: the box is 90 × 140 image px
+    buffer = rng.uniform(0, 80, size=2 * height * width + 7).astype(np.float32)
+    at_a, at_b = 3, 3 + height * width
+    origin = (120.0, 40.0)
+    inside = 0
+    for _ in range(200):
+        a, b = (np.array(origin) + rng.uniform(-10, (MAP_COARSENING * width + 10, MAP_COARSENING * height + 10), 2)
+                for _ in range(2))
+        if not _segment_inside(a, b, *origin, height, width):
+            continue
+        inside += 1
+        d1, d2 = np.empty(len(FRACTIONS)), np.empty(len(FRACTIONS))
+        _inside_lookups(buffer, at_a, at_b, height, width, a, b, *origin, FRACTIONS, d1, d2)
+        for s, f in enumerate(FRACTIONS):
+            x, y = a + f * (b - a) - origin
+            assert d1[s] == _bilinear(buffer, at_a, height, width, x, y)
+            assert d2[s] == _bilinear(buffer, at_b, height, width, x, y)
+    assert inside > 100
+    last_centre = MAP_COARSENING * (width - 1) + 0.5 * (MAP_COARSENING - 1)   # [px] the last cell's centre, from the box
+    end = np.array(origin) + (last_centre, 30.0)
+    assert _segment_inside(np.array(origin) + (20.0, 30.0), end - (0.01, 0.0), *origin, height, width)
+    assert not _segment_inside(np.array(origin) + (20.0, 30.0), end + (0.001, 0.0), *origin, height, width)
+    assert not _segment_inside(np.array(origin) + (20.0, 30.0), np.array(origin) + (-1.0, -1.0), *origin, height, width)

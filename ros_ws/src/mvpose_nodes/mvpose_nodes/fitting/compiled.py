@@ -28,6 +28,8 @@ from mvpose_nodes.vision.contour import SIDE_A, SIDE_B
 
 MAP_LABELS = (LABEL_TORSO, LABEL_HEAD, LABEL_LEFT_LEG, LABEL_RIGHT_LEG)  # the parts with labelled bones
 LABEL_SLOT = {label: slot for slot, label in enumerate(MAP_LABELS)}
+STEP_BITS = BILINEAR_STEPS.bit_length() - 1   # log2 of BILINEAR_STEPS, a power of two
+INSIDE_MARGIN = 1e-6   # [map cells] far above the rounding of a segment's points (1e-12 for a map of 1e4 cells)
 
 class FramePack(NamedTuple):
     """One frame's views for the compiled objective (V views, in the order of the fitter's view list).
@@ -190,27 +192,71 @@ def _bilinear(buffer, at, height, width, x, y):
     x0, y0 = qx // BILINEAR_STEPS, qy // BILINEAR_STEPS
     x1, y1 = min(x0 + 1, width - 1), min(y0 + 1, height - 1)
     fx, fy = (qx % BILINEAR_STEPS) / BILINEAR_STEPS, (qy % BILINEAR_STEPS) / BILINEAR_STEPS
-    v00 = np.float64(buffer[at + y0 * width + x0])
-    v01 = np.float64(buffer[at + y0 * width + x1])
-    v10 = np.float64(buffer[at + y1 * width + x0])
-    v11 = np.float64(buffer[at + y1 * width + x1])
-    top = v00 + fx * (v01 - v00)
-    bottom = v10 + fx * (v11 - v10)
-    return top + fy * (bottom - top) + MAP_COARSENING * np.hypot(gx - cx, gy - cy)
+    return (_corners(buffer, at, y0 * width + x0, y0 * width + x1, y1 * width + x0, y1 * width + x1, fx, fy)
+            + MAP_COARSENING * np.hypot(gx - cx, gy - cy))
 
 
 @njit(cache=True, nogil=True, error_model='numpy')
-def _capsule_residual(x, y, start, end, radius, terminal):
-    """objective.capsule_residuals of one point (x, y) [px] and one capsule: its distance to the segment
-    start–end (2,) [px] less the radius [px]; inf beyond the end of a terminal capsule."""
+def _corners(buffer, at, i00, i01, i10, i11, fx, fy):
+    """The bilinear interpolation at fractions fx, fy [0, 1) between a map's four values at indices
+    at + i00 (top left), i01 (top right), i10, i11 (bottom left, right) of `buffer`."""
+    v00 = np.float64(buffer[at + i00])
+    v01 = np.float64(buffer[at + i01])
+    v10 = np.float64(buffer[at + i10])
+    v11 = np.float64(buffer[at + i11])
+    top = v00 + fx * (v01 - v00)
+    bottom = v10 + fx * (v11 - v10)
+    return top + fy * (bottom - top)
+
+
+@njit(cache=True, nogil=True, error_model='numpy')
+def _segment_inside(a, b, origin_x, origin_y, height, width):
+    """Whether both ends of the segment a–b (2,) [px] lie inside a (height, width) map on the
+    MAP_COARSENING grid whose box starts at image pixel (origin_x, origin_y), by over INSIDE_MARGIN of a
+    map cell: then every point between does too, however the arithmetic rounds."""
+    for end in range(2):
+        x, y = (a[0], a[1]) if end == 0 else (b[0], b[1])
+        gx = (x - origin_x + 0.5) / MAP_COARSENING - 0.5
+        gy = (y - origin_y + 0.5) / MAP_COARSENING - 0.5
+        if not (INSIDE_MARGIN < gx < width - 1.0 - INSIDE_MARGIN and INSIDE_MARGIN < gy < height - 1.0 - INSIDE_MARGIN):
+            return False
+    return True
+
+
+@njit(cache=True, nogil=True, error_model='numpy')
+def _inside_lookups(buffer, at_a, at_b, height, width, a, b, origin_x, origin_y, fractions, d1, d2):
+    """_bilinear of a part's two maps (their first indices at_a, at_b: one box, one shape) at the points
+    a + f·(b − a) [px] (f in fractions (N,)) of a segment that _segment_inside found inside the map, into d1
+    and d2 (N,): the same numbers as _bilinear's, computed for both maps at once and without its clamping
+    (nothing to clamp; the distance beyond the map is 0), so that the loop compiles to vector instructions."""
+    for s in range(len(fractions)):
+        x = a[0] + fractions[s] * (b[0] - a[0]) - origin_x
+        y = a[1] + fractions[s] * (b[1] - a[1]) - origin_y
+        gx, gy = (x + 0.5) / MAP_COARSENING - 0.5, (y + 0.5) / MAP_COARSENING - 0.5
+        qx, qy = np.int64(np.rint(gx * BILINEAR_STEPS)), np.int64(np.rint(gy * BILINEAR_STEPS))
+        x0, y0 = qx >> STEP_BITS, qy >> STEP_BITS   # qx, qy >= 0: // and % by BILINEAR_STEPS
+        fx, fy = (qx & (BILINEAR_STEPS - 1)) / BILINEAR_STEPS, (qy & (BILINEAR_STEPS - 1)) / BILINEAR_STEPS
+        x1, y1 = min(x0 + 1, width - 1), min(y0 + 1, height - 1)
+        i00, i01, i10, i11 = y0 * width + x0, y0 * width + x1, y1 * width + x0, y1 * width + x1
+        d1[s] = _corners(buffer, at_a, i00, i01, i10, i11, fx, fy) + 0.0   # _bilinear's sum, hypot(0, 0) = 0
+        d2[s] = _corners(buffer, at_b, i00, i01, i10, i11, fx, fy) + 0.0
+
+
+@njit(cache=True, nogil=True, error_model='numpy')
+def _capsule_residuals(xs, ys, start, end, radius, terminal, out):
+    """objective.capsule_residuals of the points (xs, ys) (M,) [px] and one capsule, into out (M,): each
+    point's distance to the segment start–end (2,) [px] less the radius [px]; inf beyond the end of a
+    terminal capsule. Branch-free, so that the loop compiles to vector instructions."""
     ax, ay = end[0] - start[0], end[1] - start[1]
-    ox, oy = x - start[0], y - start[1]
-    along = (ox * ax + oy * ay) / (ax * ax + ay * ay + 1e-9)
-    if along > 1.0 and terminal:
-        return np.inf
-    clamped = min(max(along, 0.0), 1.0)
-    gx, gy = ox - clamped * ax, oy - clamped * ay
-    return np.sqrt(gx * gx + gy * gy) - radius
+    length2 = ax * ax + ay * ay + 1e-9
+    beyond_end = np.inf if terminal else -np.inf   # max(residual, beyond_end): inf, or the residual
+    for p in range(len(xs)):
+        ox, oy = xs[p] - start[0], ys[p] - start[1]
+        along = (ox * ax + oy * ay) / length2
+        clamped = min(max(along, 0.0), 1.0)
+        gx, gy = ox - clamped * ax, oy - clamped * ay
+        residual = np.sqrt(gx * gx + gy * gy) - radius
+        out[p] = max(residual, beyond_end) if along > 1.0 else residual
 
 
 @njit(cache=True, nogil=True, error_model='numpy')
@@ -219,6 +265,33 @@ def stage_objective(values, stage, frame, bone_lengths, fractions, samples, used
     its parameters. stage: StagePack; frame: FramePack; bone_lengths (14,) [m]; fractions
     (SEGMENT_POINTS,) and samples (INSIDE_SAMPLES,): objective._fractions; used (V,) bool, set where a view
     contributed. Returns the cost (the reference's units: px and px² under the settings' weights)."""
+    point_range, work = _work_arrays(stage, frame, fractions)
+    return _objective(values, stage, frame, bone_lengths, fractions, samples, used, point_range, work)
+
+
+@njit(cache=True, nogil=True, error_model='numpy')
+def _work_arrays(stage, frame, fractions):
+    """What an evaluation of stage_objective needs beside its arguments, made once per search: each view's
+    outline points' first and last + 1 index (V, 2) (StagePack.points are grouped by view) and a (6, M)
+    float64 work array: the points' x and y (rows 1, 2, contiguous for vector instructions) and room for
+    one view's nearest residuals (row 0), one segment's look-ups (rows 3, 4) and one capsule's residuals
+    (row 5)."""
+    views, count = frame.K.shape[0], len(stage.point_view)
+    point_range = np.zeros((views, 2), np.int64)
+    for p in range(count):
+        v = stage.point_view[p]
+        if point_range[v, 1] == 0:
+            point_range[v, 0] = p
+        point_range[v, 1] = p + 1
+    work = np.empty((6, max(count, len(fractions))))
+    work[1, :count] = stage.points[:, 0]
+    work[2, :count] = stage.points[:, 1]
+    return point_range, work
+
+
+@njit(cache=True, nogil=True, error_model='numpy')
+def _objective(values, stage, frame, bone_lengths, fractions, samples, used, point_range, work):
+    """stage_objective with its _work_arrays given."""
     w = stage.weights
     parameters = stage.base.copy()
     smoothness = limits = 0.0
@@ -264,14 +337,18 @@ def stage_objective(values, stage, frame, bone_lengths, fractions, samples, used
                     d = np.float64(frame.outside[frame.outside_at[v] + row * width + column])
                     inside += d * d
             total += w[2] * inside
-            for p in range(len(stage.points)):
-                if stage.point_view[p] != v:
-                    continue
-                nearest = np.inf
-                for k in range(capsule_count):
-                    nearest = min(nearest, _capsule_residual(stage.points[p, 0], stage.points[p, 1], starts[k],
-                                                             ends[k], radii[k], stage.capsule_terminal[k]))
-                e = min(nearest, w[4]) / w[3]
+            # Capsule by capsule over the view's points (vector instructions).
+            first, last = point_range[v, 0], point_range[v, 1]
+            count = last - first
+            nearest, residuals = work[0, :count], work[5, :count]
+            nearest[:] = np.inf
+            for k in range(capsule_count):
+                _capsule_residuals(work[1, first:last], work[2, first:last], starts[k], ends[k], radii[k],
+                                   stage.capsule_terminal[k], residuals)
+                for p in range(count):
+                    nearest[p] = min(nearest[p], residuals[p])
+            for p in range(count):
+                e = min(nearest[p], w[4]) / w[3]
                 outline += w[3] * w[3] * np.log1p(e * e)
         # Eq. 4–5 with the enclosure term for the stage's labelled bones (objective.limb_cost).
         for i in range(len(stage.bones)):
@@ -284,11 +361,18 @@ def stage_objective(values, stage, frame, bone_lengths, fractions, samples, used
             height, width = frame.boundary_shape[v, slot, 0], frame.boundary_shape[v, slot, 1]
             ox, oy = frame.boundary_origin[v, slot, 0], frame.boundary_origin[v, slot, 1]
             sum1 = sum2 = enclosure = 0.0
+            within = _segment_inside(pixels[a], pixels[b], ox, oy, height, width)   # nearly always
+            if within:
+                _inside_lookups(frame.boundary, at_a, at_b, height, width, pixels[a], pixels[b], ox, oy, fractions,
+                                work[3], work[4])
             for s in range(len(fractions)):
-                x = pixels[a, 0] + fractions[s] * (pixels[b, 0] - pixels[a, 0]) - ox
-                y = pixels[a, 1] + fractions[s] * (pixels[b, 1] - pixels[a, 1]) - oy
-                d1 = _bilinear(frame.boundary, at_a, height, width, x, y)
-                d2 = _bilinear(frame.boundary, at_b, height, width, x, y)
+                if within:
+                    d1, d2 = work[3, s], work[4, s]
+                else:
+                    x = pixels[a, 0] + fractions[s] * (pixels[b, 0] - pixels[a, 0]) - ox
+                    y = pixels[a, 1] + fractions[s] * (pixels[b, 1] - pixels[a, 1]) - oy
+                    d1 = _bilinear(frame.boundary, at_a, height, width, x, y)
+                    d2 = _bilinear(frame.boundary, at_b, height, width, x, y)
                 sum1 += d1
                 sum2 += d2
                 enclosure += max(d1 + d2 - frame.boundary_width[v, slot], 0.0)
@@ -318,11 +402,12 @@ def nearest_capsules(points, starts, ends, radii, terminal):
     ends before the point)."""
     count = points.shape[0]
     nearest, residual = np.zeros(count, np.int64), np.full(count, np.inf)
-    for p in range(count):
-        for k in range(starts.shape[0]):
-            distance = _capsule_residual(points[p, 0], points[p, 1], starts[k], ends[k], radii[k], terminal[k])
-            if distance < residual[p]:
-                nearest[p], residual[p] = k, distance
+    xs, ys, distances = points[:, 0].copy(), points[:, 1].copy(), np.empty(count)   # contiguous
+    for k in range(starts.shape[0]):
+        _capsule_residuals(xs, ys, starts[k], ends[k], radii[k], terminal[k], distances)
+        for p in range(count):
+            if distances[p] < residual[p]:
+                nearest[p], residual[p] = k, distances[p]
     return nearest, residual
 
 
@@ -355,13 +440,14 @@ def nelder_mead(simplex, xatol, fatol, maxfev, stage, frame, bone_lengths, fract
     where it stands."""
     sim = simplex.copy()
     n = sim.shape[1]
+    point_range, work = _work_arrays(stage, frame, fractions)
     costs = np.full(n + 1, np.inf)
     calls = 0
     for k in range(n + 1):
         if calls >= maxfev:
             break
         calls += 1
-        costs[k] = stage_objective(sim[k].copy(), stage, frame, bone_lengths, fractions, samples, used)
+        costs[k] = _objective(sim[k].copy(), stage, frame, bone_lengths, fractions, samples, used, point_range, work)
     _sort_simplex(sim, costs)
     while calls < maxfev:
         if np.max(np.abs(sim[1:] - sim[0])) <= xatol and np.max(np.abs(costs[0] - costs[1:])) <= fatol:
@@ -375,14 +461,14 @@ def nelder_mead(simplex, xatol, fatol, maxfev, stage, frame, bone_lengths, fract
         if calls >= maxfev:
             break
         calls += 1
-        cost_reflected = stage_objective(reflected, stage, frame, bone_lengths, fractions, samples, used)
+        cost_reflected = _objective(reflected, stage, frame, bone_lengths, fractions, samples, used, point_range, work)
         shrink = False
         if cost_reflected < costs[0]:
             expanded = (1 + REFLECTION * EXPANSION) * centroid - REFLECTION * EXPANSION * worst
             if calls >= maxfev:
                 break
             calls += 1
-            cost_expanded = stage_objective(expanded, stage, frame, bone_lengths, fractions, samples, used)
+            cost_expanded = _objective(expanded, stage, frame, bone_lengths, fractions, samples, used, point_range, work)
             if cost_expanded < cost_reflected:
                 sim[n], costs[n] = expanded, cost_expanded
             else:
@@ -395,7 +481,7 @@ def nelder_mead(simplex, xatol, fatol, maxfev, stage, frame, bone_lengths, fract
                 if calls >= maxfev:
                     break
                 calls += 1
-                cost_contracted = stage_objective(contracted, stage, frame, bone_lengths, fractions, samples, used)
+                cost_contracted = _objective(contracted, stage, frame, bone_lengths, fractions, samples, used, point_range, work)
                 if cost_contracted <= cost_reflected:
                     sim[n], costs[n] = contracted, cost_contracted
                 else:
@@ -405,7 +491,7 @@ def nelder_mead(simplex, xatol, fatol, maxfev, stage, frame, bone_lengths, fract
                 if calls >= maxfev:
                     break
                 calls += 1
-                cost_contracted = stage_objective(contracted, stage, frame, bone_lengths, fractions, samples, used)
+                cost_contracted = _objective(contracted, stage, frame, bone_lengths, fractions, samples, used, point_range, work)
                 if cost_contracted < costs[n]:
                     sim[n], costs[n] = contracted, cost_contracted
                 else:
@@ -416,7 +502,7 @@ def nelder_mead(simplex, xatol, fatol, maxfev, stage, frame, bone_lengths, fract
                     if calls >= maxfev:
                         break
                     calls += 1
-                    costs[j] = stage_objective(sim[j].copy(), stage, frame, bone_lengths, fractions, samples, used)
+                    costs[j] = _objective(sim[j].copy(), stage, frame, bone_lengths, fractions, samples, used, point_range, work)
         _sort_simplex(sim, costs)
     _sort_simplex(sim, costs)
     return sim[0].copy(), costs[0], calls
