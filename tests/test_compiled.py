@@ -106,7 +106,8 @@ def test_compiled_nelder_mead_takes_scipys_steps(walk_frame, stage):
     """From the same simplex, the compiled search visits SciPy's points: the same result and evaluation
     count, also when the evaluation budget ends it."""
     from scipy.optimize import minimize
-    from mvpose_nodes.fitting.compiled import nelder_mead, stage_objective
+    from mvpose_nodes.fitting.compiled import stage_objective
+    from mvpose_nodes.fitting.compiled_search import nelder_mead
     from mvpose_nodes.fitting.stage_search import FRACTIONS, SAMPLES
     truth, views = walk_frame
     search = StageSearch(FitterSettings(), bone_lengths(1.75))

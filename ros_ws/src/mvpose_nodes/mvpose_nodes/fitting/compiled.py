@@ -1,5 +1,5 @@
 """The stage objective compiled with numba (its forward kinematics: compiled_kinematics.py): what the
-Nelder–Mead searches evaluate.
+Nelder–Mead searches (compiled_search.py) evaluate.
 
 StageSearch.stage_cost (stage_search.py, with objective.py) is the readable numpy reference of a
 stage's objective; `stage_objective` here computes the same number in one compiled call, which equals
@@ -265,12 +265,12 @@ def stage_objective(values, stage, frame, bone_lengths, fractions, samples, used
     its parameters. stage: StagePack; frame: FramePack; bone_lengths (14,) [m]; fractions
     (SEGMENT_POINTS,) and samples (INSIDE_SAMPLES,): objective._fractions; used (V,) bool, set where a view
     contributed. Returns the cost (the reference's units: px and px² under the settings' weights)."""
-    point_range, work = _work_arrays(stage, frame, fractions)
-    return _objective(values, stage, frame, bone_lengths, fractions, samples, used, point_range, work)
+    point_range, work = work_arrays(stage, frame, fractions)
+    return evaluate(values, stage, frame, bone_lengths, fractions, samples, used, point_range, work)
 
 
 @njit(cache=True, nogil=True, error_model='numpy')
-def _work_arrays(stage, frame, fractions):
+def work_arrays(stage, frame, fractions):
     """What an evaluation of stage_objective needs beside its arguments, made once per search: each view's
     outline points' first and last + 1 index (V, 2) (StagePack.points are grouped by view) and a (6, M)
     float64 work array: the points' x and y (rows 1, 2, contiguous for vector instructions) and room for
@@ -290,8 +290,8 @@ def _work_arrays(stage, frame, fractions):
 
 
 @njit(cache=True, nogil=True, error_model='numpy')
-def _objective(values, stage, frame, bone_lengths, fractions, samples, used, point_range, work):
-    """stage_objective with its _work_arrays given."""
+def evaluate(values, stage, frame, bone_lengths, fractions, samples, used, point_range, work):
+    """stage_objective with its work_arrays given (compiled_search.nelder_mead makes them once per search)."""
     w = stage.weights
     parameters = stage.base.copy()
     smoothness = limits = 0.0
@@ -409,121 +409,3 @@ def nearest_capsules(points, starts, ends, radii, terminal):
             if distances[p] < residual[p]:
                 nearest[p], residual[p] = k, distances[p]
     return nearest, residual
-
-
-# Nelder–Mead (Lagarias et al. 1998) with paper 000's coefficients (Eq. 7): reflection ρ = 1, expansion
-# χ = 2, contraction γ = 0.5, shrink σ = 0.5; step for step SciPy's non-adaptive
-# scipy.optimize.minimize(method='Nelder-Mead') with an initial simplex, xatol, fatol and maxfev (its
-# _minimize_neldermead, SciPy 1.17), so that a search gives SciPy's result (tests/test_compiled.py),
-# without the interpreter between the evaluations.
-REFLECTION, EXPANSION, CONTRACTION, SHRINK = 1.0, 2.0, 0.5, 0.5
-
-
-@njit(cache=True)
-def _sort_simplex(simplex, costs):
-    """Sort the vertices by cost, ascending; ties keep their order (insertion sort, as numpy's sort of
-    fewer than 16 numbers)."""
-    for i in range(1, len(costs)):
-        j = i
-        while j > 0 and costs[j] < costs[j - 1]:
-            costs[j], costs[j - 1] = costs[j - 1], costs[j]
-            row = simplex[j].copy()
-            simplex[j] = simplex[j - 1]
-            simplex[j - 1] = row
-            j -= 1
-
-
-@njit(cache=True)
-def nelder_mead(simplex, xatol, fatol, maxfev, stage, frame, bone_lengths, fractions, samples, used):
-    """Minimise stage_objective from the initial simplex (n + 1, n). Returns (x (n,), cost, evaluations).
-    At most maxfev evaluations; as in SciPy, the evaluation that would exceed them ends the search
-    where it stands."""
-    sim = simplex.copy()
-    n = sim.shape[1]
-    point_range, work = _work_arrays(stage, frame, fractions)
-    costs = np.full(n + 1, np.inf)
-    calls = 0
-    for k in range(n + 1):
-        if calls >= maxfev:
-            break
-        calls += 1
-        costs[k] = _objective(sim[k].copy(), stage, frame, bone_lengths, fractions, samples, used, point_range, work)
-    _sort_simplex(sim, costs)
-    while calls < maxfev:
-        if np.max(np.abs(sim[1:] - sim[0])) <= xatol and np.max(np.abs(costs[0] - costs[1:])) <= fatol:
-            break
-        centroid = sim[0].copy()
-        for row in range(1, n):
-            centroid += sim[row]
-        centroid /= n
-        worst = sim[n].copy()
-        reflected = (1 + REFLECTION) * centroid - REFLECTION * worst
-        if calls >= maxfev:
-            break
-        calls += 1
-        cost_reflected = _objective(reflected, stage, frame, bone_lengths, fractions, samples, used, point_range, work)
-        shrink = False
-        if cost_reflected < costs[0]:
-            expanded = (1 + REFLECTION * EXPANSION) * centroid - REFLECTION * EXPANSION * worst
-            if calls >= maxfev:
-                break
-            calls += 1
-            cost_expanded = _objective(expanded, stage, frame, bone_lengths, fractions, samples, used, point_range, work)
-            if cost_expanded < cost_reflected:
-                sim[n], costs[n] = expanded, cost_expanded
-            else:
-                sim[n], costs[n] = reflected, cost_reflected
-        elif cost_reflected < costs[n - 1]:
-            sim[n], costs[n] = reflected, cost_reflected
-        else:
-            if cost_reflected < costs[n]:
-                contracted = (1 + CONTRACTION * REFLECTION) * centroid - CONTRACTION * REFLECTION * worst
-                if calls >= maxfev:
-                    break
-                calls += 1
-                cost_contracted = _objective(contracted, stage, frame, bone_lengths, fractions, samples, used, point_range, work)
-                if cost_contracted <= cost_reflected:
-                    sim[n], costs[n] = contracted, cost_contracted
-                else:
-                    shrink = True
-            else:
-                contracted = (1 - CONTRACTION) * centroid + CONTRACTION * worst
-                if calls >= maxfev:
-                    break
-                calls += 1
-                cost_contracted = _objective(contracted, stage, frame, bone_lengths, fractions, samples, used, point_range, work)
-                if cost_contracted < costs[n]:
-                    sim[n], costs[n] = contracted, cost_contracted
-                else:
-                    shrink = True
-            if shrink:
-                for j in range(1, n + 1):
-                    sim[j] = sim[0] + SHRINK * (sim[j] - sim[0])
-                    if calls >= maxfev:
-                        break
-                    calls += 1
-                    costs[j] = _objective(sim[j].copy(), stage, frame, bone_lengths, fractions, samples, used, point_range, work)
-        _sort_simplex(sim, costs)
-    _sort_simplex(sim, costs)
-    return sim[0].copy(), costs[0], calls
-
-
-# The entry point from Python, with the packs' fields as separate arguments: numba types top-level arrays in C,
-# but the arrays inside a tuple in Python, at about 10 µs each, which cost more than a stage objective.
-@njit(cache=True, nogil=True, error_model='numpy')
-def search(simplex, xatol, fatol, maxfev, bone_lengths, fractions, samples, used,
-           indices, base, start, steps, low, high, capsules, capsule_radius, capsule_terminal, assigned,
-           points, point_view, bones, bone_slot, keypoint_view, keypoint_joint, keypoint_xy, keypoint_weight,
-           twist_bones, twist_reference, twist_neutral, twist_low, twist_high, twist_hinge, lateral_low, lateral_high,
-           weights, K, R, t, D, has_outline, outside, outside_at, outside_shape, outside_origin, slot, boundary,
-           boundary_at, boundary_shape, boundary_origin, boundary_width):
-    """nelder_mead with the StagePack and FramePack given field by field: search(..., *stage, *frame).
-    With maxfev 1 it evaluates the simplex's first vertex and stops: one evaluation of the objective."""
-    stage = StagePack(indices, base, start, steps, low, high, capsules, capsule_radius, capsule_terminal,
-                      assigned, points, point_view, bones, bone_slot, keypoint_view, keypoint_joint, keypoint_xy,
-                      keypoint_weight, twist_bones, twist_reference, twist_neutral, twist_low, twist_high, twist_hinge,
-                      lateral_low, lateral_high, weights)
-    frame = FramePack(K, R, t, D, has_outline, outside, outside_at, outside_shape, outside_origin, slot, boundary,
-                      boundary_at, boundary_shape, boundary_origin, boundary_width)
-    return nelder_mead(simplex, xatol, fatol, maxfev, stage, frame, bone_lengths, fractions, samples, used)
-

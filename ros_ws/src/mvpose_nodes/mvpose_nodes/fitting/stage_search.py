@@ -27,7 +27,8 @@ import numpy as np
 from mvpose_nodes.body.kinematics import BONE_INDEX, BONES, forward_kinematics
 from mvpose_nodes.body.model import (JOINT_INDEX, LABEL_HEAD, LABEL_LEFT_LEG, LABEL_RIGHT_LEG, LABEL_TORSO,
                                      PARAMETER_INDEX)
-from mvpose_nodes.fitting.compiled import LABEL_SLOT, StagePack, fractions_arrays, nearest_capsules, search
+from mvpose_nodes.fitting.compiled import LABEL_SLOT, StagePack, fractions_arrays, nearest_capsules
+from mvpose_nodes.fitting.compiled_search import search
 from mvpose_nodes.fitting.compiled_kinematics import bone_length_array
 from mvpose_nodes.fitting.limb_limits import LATERAL_STIFFNESS
 from mvpose_nodes.fitting.objective import (CAPSULE_RADII, OUTLINE_STEP, TERMINAL_BONES, cauchy_loss, inside_cost,
@@ -187,7 +188,7 @@ class StageSearch:
     def search(self, stage, parameters, views, assigned, frame):
         """One Nelder–Mead stage over STAGE_PARAMETERS[stage]; (new parameters, StageResult). assigned:
         per view the outline points the stage explains (outline_assignment); frame: the views'
-        compiled.FramePack. The search is compiled.nelder_mead (SciPy's, step for step) and each
+        compiled.FramePack. The search is compiled_search.nelder_mead (SciPy's, step for step) and each
         evaluation compiled.stage_objective: stage_cost plus the priors."""
         settings = self.settings
         if not has_evidence(stage, views, assigned):
