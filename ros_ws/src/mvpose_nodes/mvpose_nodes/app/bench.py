@@ -10,7 +10,8 @@ processes, as in `./mvpose demo`. Instead of `bag play`, this process publishes 
       camera or `bag play` would; the fitter then skips what it cannot keep up with (pending_frame_sets).
 Wall times in this process give the latencies:
 
-  decode      cv2.imdecode of one of the bag's images, here, on one core (before the graph starts)
+  decode      decode_image (vision/decoding.py, as the nodes decode) of one of the bag's images, here, on
+              one core (before the graph starts)
   features    images of a frame set published -> /cam<K>/labelled_contour of that stamp received, per camera
               (DDS, decode and the feature pipeline in the camera_features node)
   sync wait   skeleton received - fit_time - the last camera's contour received (the wait for the set
@@ -134,16 +135,17 @@ class LoopedFrameSets:
 
 
 def decode_times(frame_sets):
-    """Milliseconds of cv2.imdecode for every image of the frame sets, in this process."""
-    import cv2
+    """Milliseconds of vision.decoding.decode_image (as the camera_features nodes decode) for every image of
+    the frame sets, in this process."""
     from rclpy.serialization import deserialize_message
     from sensor_msgs.msg import CompressedImage
+    from mvpose_nodes.vision.decoding import decode_image
     times, shape = [], None
     for _, views in frame_sets:
         for data in views.values():
-            buffer = np.frombuffer(bytes(deserialize_message(data, CompressedImage).data), np.uint8)
+            buffer = bytes(deserialize_message(data, CompressedImage).data)
             started = time.perf_counter()
-            image = cv2.imdecode(buffer, cv2.IMREAD_COLOR)
+            image = decode_image(buffer)
             times.append(1e3 * (time.perf_counter() - started))
             if image is None:
                 raise UserError('an image of the bag does not decode')

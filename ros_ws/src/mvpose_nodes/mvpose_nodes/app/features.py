@@ -172,13 +172,14 @@ def report(bag, images, no_person, ious, skin_counts, errors, offsets, matched, 
 def benchmark(args, extractor):
     import cv2
     from mvpose_nodes.ros.camera_bag import cameras_in, frame_sets
+    from mvpose_nodes.vision.decoding import decode_image
     cameras_in(args.bag, args.cameras)
     decode, stages, totals = [], {}, []
     for frame_set in frame_sets(args.bag, args.cameras):
         for rgb in frame_set.images.values():
             ok, jpeg = cv2.imencode('.jpg', cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR), [cv2.IMWRITE_JPEG_QUALITY, 90])
             started = time.perf_counter()
-            cv2.cvtColor(cv2.imdecode(jpeg, cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB)
+            decode_image(jpeg)
             decode.append(time.perf_counter() - started)
             started = time.perf_counter()
             features = extractor(rgb)

@@ -15,6 +15,7 @@ from std_msgs.msg import Header
 from mvpose_nodes.body.model import JOINT_NAMES, joint_orientations
 from mvpose_nodes.body.camera import Camera
 from mvpose_nodes.vision.features import MAX_IMAGE_PIXELS, MIN_IMAGE_SIDE
+from mvpose_nodes.vision.decoding import decode_image
 
 WORLD_FRAME = 'world'
 
@@ -104,11 +105,10 @@ def image_from_compressed(message):
     mono = message.format.startswith('mono8')
     if not len(message.data):
         raise ValueError(f"CompressedImage has no data (format '{message.format}')")
-    decoded = cv2.imdecode(np.frombuffer(bytes(message.data), np.uint8),
-                           cv2.IMREAD_GRAYSCALE if mono else cv2.IMREAD_COLOR)
+    decoded = decode_image(message.data, mono)
     if decoded is None:
         raise ValueError(f"CompressedImage data does not decode (format '{message.format}')")
-    return decoded if mono else cv2.cvtColor(decoded, cv2.COLOR_BGR2RGB)
+    return decoded
 
 
 def image_from_raw(message):

@@ -191,7 +191,7 @@ def format_table(result):
         '  latency [ms]          median      p95',
     ]
     stages = stage_latencies(result.sent, result.features, result.skeletons)
-    notes = {'decode': '(cv2.imdecode of one image, this process)',
+    notes = {'decode': '(decode_image of one image, as the nodes decode, this process)',
              'features': '(images sent -> contour received, per camera)',
              'sync wait': '(skeleton received - fit - last contour received; includes queueing behind the previous fit)',
              'fit': '(Skeleton.fit_time)',

@@ -48,13 +48,14 @@ def render_camera(case, view, motion, index):
     import cv2
     from mvpose_nodes.studio import scene
     from mvpose_nodes.studio.i3dpost import FRAME_RATE
+    from mvpose_nodes.vision.decoding import decode_image
     number = view.camera.number
     pose = pose_at(motion, index + case.jitter[case.cameras.index(number)] * FRAME_RATE)
     shadow, centre = scene.floor_shadow(pose, case.appearance) if case.shadows else (None, None)
     rendering = scene.render(view, pose, case.appearance, shadow, centre)
     rgb, _ = case.realism.finish(rendering, view, number, case.seed, index)
     ok, data = cv2.imencode('.jpg', cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR), [cv2.IMWRITE_JPEG_QUALITY, case.jpeg_quality])
-    return cv2.cvtColor(cv2.imdecode(data, cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB), rendering.labels
+    return decode_image(data), rendering.labels
 
 
 def case_features(case, motion, cache=None):
