@@ -200,3 +200,22 @@ def test_a_segment_inside_its_maps_is_read_as_point_by_point_to_the_bit():
     assert _segment_inside(np.array(origin) + (20.0, 30.0), end - (0.01, 0.0), *origin, height, width)
     assert not _segment_inside(np.array(origin) + (20.0, 30.0), end + (0.001, 0.0), *origin, height, width)
     assert not _segment_inside(np.array(origin) + (20.0, 30.0), np.array(origin) + (-1.0, -1.0), *origin, height, width)
+
+
+def test_outline_points_out_of_view_order_are_refused(walk_frame):
+    """The objective reads each view's outline points as one run of StagePack.points (work_arrays): points
+    not grouped by view in view order are an error, not a silently wrong cost."""
+    from mvpose_nodes.fitting.compiled import stage_objective
+    from mvpose_nodes.fitting.stage_search import FRACTIONS, SAMPLES
+    truth, views = walk_frame
+    search = StageSearch(FitterSettings(), bone_lengths(1.75))
+    parameters = inverse_kinematics(truth)
+    pack = search.stage_pack('torso', parameters, views, search.outline_assignment('torso', parameters, views),
+                             priors=True)
+    assert len(set(pack.point_view.tolist())) > 1
+    indices = stage_indices('torso')
+    flags = np.zeros(len(views), bool)
+    stage_objective(parameters[indices], pack, pack_frame(views), search.bone_lengths, FRACTIONS, SAMPLES, flags)
+    shuffled = pack._replace(point_view=pack.point_view[::-1].copy(), points=pack.points[::-1].copy())
+    with pytest.raises(ValueError, match='grouped by view'):
+        stage_objective(parameters[indices], shuffled, pack_frame(views), search.bone_lengths, FRACTIONS, SAMPLES, flags)

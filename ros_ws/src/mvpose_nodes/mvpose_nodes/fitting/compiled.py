@@ -63,7 +63,8 @@ class StagePack(NamedTuple):
     """One stage's search in arrays. indices (n,): the parameters searched; base (29,): the others'
     values; start, steps (n,) and low, high (n,) (±inf: no limit) for the priors; capsules (K,) bone
     indices, capsule_radius (K,) [m], capsule_terminal (K,) bool; assigned (V,) bool (the view has an
-    outline assignment), points (P, 2) [px] and point_view (P,) the assigned outline points; bones (B,)
+    outline assignment), points (P, 2) [px] and point_view (P,) the assigned outline points, grouped by view
+    in view order; bones (B,)
     bone indices with labelled boundaries and bone_slot (B,) their MAP_LABELS slot; keypoint_view,
     keypoint_joint (Q,), keypoint_xy (Q, 2) [px], keypoint_weight (Q,); the limbs' twist and lateral limits
     (stage_search.twist_arrays: twist_bones (T,), twist_reference, twist_neutral (T, 3), twist_low,
@@ -280,6 +281,8 @@ def work_arrays(stage, frame, fractions):
     point_range = np.zeros((views, 2), np.int64)
     for p in range(count):
         v = stage.point_view[p]
+        if p and v < stage.point_view[p - 1]:
+            raise ValueError('StagePack.point_view must be grouped by view, in view order')
         if point_range[v, 1] == 0:
             point_range[v, 0] = p
         point_range[v, 1] = p + 1
