@@ -64,8 +64,7 @@ class StagePack(NamedTuple):
     values; start, steps (n,) and low, high (n,) (±inf: no limit) for the priors; capsules (K,) bone
     indices, capsule_radius (K,) [m], capsule_terminal (K,) bool; assigned (V,) bool (the view has an
     outline assignment), points (P, 2) [px] and point_view (P,) the assigned outline points, grouped by view
-    in view order; bones (B,)
-    bone indices with labelled boundaries and bone_slot (B,) their MAP_LABELS slot; keypoint_view,
+    in view order; bones (B,) bone indices with labelled boundaries and bone_slot (B,) their MAP_LABELS slot; keypoint_view,
     keypoint_joint (Q,), keypoint_xy (Q, 2) [px], keypoint_weight (Q,); the limbs' twist and lateral limits
     (stage_search.twist_arrays: twist_bones (T,), twist_reference, twist_neutral (T, 3), twist_low,
     twist_high (T,) [rad], twist_hinge (T,), lateral_low, lateral_high (T,) [rad]); weights (10,): enclosure, outline,
@@ -183,11 +182,18 @@ def _project(frame, view, joints):
 
 
 @njit(cache=True, nogil=True, error_model='numpy')
+def _on_grid(offset):
+    """An image pixel's position [px] from a map's box origin, in the map's cells on the MAP_COARSENING grid
+    (pixel centres; objective.bilinear's `grid`)."""
+    return (offset + 0.5) / MAP_COARSENING - 0.5
+
+
+@njit(cache=True, nogil=True, error_model='numpy')
 def _bilinear(buffer, at, height, width, x, y):
     """objective.bilinear of one (height, width) map on the MAP_COARSENING grid, flattened in `buffer` from
     index `at`, at a point (x, y) [px] in image pixels from the map's box origin: bilinear inside, the
     nearest edge value plus the distance outside."""
-    gx, gy = (x + 0.5) / MAP_COARSENING - 0.5, (y + 0.5) / MAP_COARSENING - 0.5
+    gx, gy = _on_grid(x), _on_grid(y)
     cx, cy = min(max(gx, 0.0), width - 1.0), min(max(gy, 0.0), height - 1.0)
     qx, qy = int(np.rint(cx * BILINEAR_STEPS)), int(np.rint(cy * BILINEAR_STEPS))
     x0, y0 = qx // BILINEAR_STEPS, qy // BILINEAR_STEPS
@@ -217,8 +223,7 @@ def _segment_inside(a, b, origin_x, origin_y, height, width):
     map cell: then every point between does too, however the arithmetic rounds."""
     for end in range(2):
         x, y = (a[0], a[1]) if end == 0 else (b[0], b[1])
-        gx = (x - origin_x + 0.5) / MAP_COARSENING - 0.5
-        gy = (y - origin_y + 0.5) / MAP_COARSENING - 0.5
+        gx, gy = _on_grid(x - origin_x), _on_grid(y - origin_y)
         if not (INSIDE_MARGIN < gx < width - 1.0 - INSIDE_MARGIN and INSIDE_MARGIN < gy < height - 1.0 - INSIDE_MARGIN):
             return False
     return True
@@ -233,7 +238,7 @@ def _inside_lookups(buffer, at_a, at_b, height, width, a, b, origin_x, origin_y,
     for s in range(len(fractions)):
         x = a[0] + fractions[s] * (b[0] - a[0]) - origin_x
         y = a[1] + fractions[s] * (b[1] - a[1]) - origin_y
-        gx, gy = (x + 0.5) / MAP_COARSENING - 0.5, (y + 0.5) / MAP_COARSENING - 0.5
+        gx, gy = _on_grid(x), _on_grid(y)
         qx, qy = np.int64(np.rint(gx * BILINEAR_STEPS)), np.int64(np.rint(gy * BILINEAR_STEPS))
         x0, y0 = qx >> STEP_BITS, qy >> STEP_BITS   # qx, qy >= 0: // and % by BILINEAR_STEPS
         fx, fy = (qx & (BILINEAR_STEPS - 1)) / BILINEAR_STEPS, (qy & (BILINEAR_STEPS - 1)) / BILINEAR_STEPS
