@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 
 from mvpose_nodes.body.model import PARAMETER_NAMES
-from mvpose_nodes.body.geometry import normalize, quaternion_from_matrix, rotation_between
+from mvpose_nodes.body.geometry import (cross, matrix_from_quaternion, normalize, quaternion_from_matrix,
+                                        rotation_between)
 from mvpose_nodes.body.kinematics import (BONES, JOINT_INDEX, PARAMETER_INDEX, bone_lengths, euler_from_quaternion,
                                      euler_matrix, forward_kinematics, inverse_kinematics, lengths_of)
 
@@ -112,6 +113,25 @@ def test_parallel_and_antiparallel_bones():
     raised[JOINT_INDEX['left_wrist']] = shoulder + [0, 0, LENGTHS['upper_arm'] + LENGTHS['forearm']]
     again, _ = forward_kinematics(inverse_kinematics(raised), LENGTHS)
     assert np.allclose(again, raised, atol=1e-9)
+
+
+@pytest.mark.parametrize('shape', [(3,), (7, 3), (2, 5, 3)])
+def test_the_vector_helpers_compute_as_numpy_does_to_the_bit(shape):
+    """cross and normalize skip NumPy's general routines for speed: the same numbers, single or batched."""
+    rng = np.random.default_rng(len(shape))
+    a, b = rng.normal(size=shape), rng.normal(size=shape)
+    assert np.array_equal(cross(a, b), np.cross(a, b))
+    assert np.array_equal(normalize(a), a / np.linalg.norm(a, axis=-1, keepdims=True))
+    assert np.array_equal(normalize(np.zeros(shape)), np.zeros(shape))
+    q = rng.normal(size=shape[:-1] + (4,))
+    batch = matrix_from_quaternion(q).reshape(-1, 3, 3)
+    assert np.array_equal(batch, [matrix_from_quaternion(one) for one in q.reshape(-1, 4)])
+    assert np.allclose(batch @ batch.transpose(0, 2, 1), np.eye(3), atol=1e-12)
+    rows_a, rows_b = a.reshape(-1, 3), b.reshape(-1, 3).copy()
+    rows_b[0], rows_b[-1] = (2.0 if len(rows_b) > 1 else -3.0) * rows_a[0], -3.0 * rows_a[-1]   # (anti-)parallel
+    batch = rotation_between(rows_a, rows_b)
+    assert np.array_equal(batch, [rotation_between(x, y) for x, y in zip(rows_a, rows_b)])
+    assert np.allclose(np.linalg.norm(batch, axis=-1), 1.0, atol=1e-12)
 
 
 def test_lengths_of_random_poses_are_the_bone_lengths_left_and_right_averaged():

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from mvpose_nodes.body.model import JOINT_INDEX, JOINT_NAMES, PARAMETER_INDEX, PARAMETER_NAMES
-from mvpose_nodes.body.geometry import matrix_from_quaternion, normalize, quaternion_from_matrix, rotation_between
+from mvpose_nodes.body.geometry import cross, matrix_from_quaternion, normalize, quaternion_from_matrix, rotation_between
 
 
 # Bone lengths as fractions of the stature (Winter's table: hip joint at 0.530 H, knee 0.285, ankle
@@ -149,7 +149,7 @@ def torso_rotation(joints):
     up = normalize(joints[JOINT_INDEX['neck']] - joints[JOINT_INDEX['pelvis']])
     right = joints[JOINT_INDEX['right_hip']] - joints[JOINT_INDEX['left_hip']]
     right = normalize(right - np.dot(right, up) * up)
-    return np.column_stack([right, np.cross(up, right), up])
+    return np.column_stack([right, cross(up, right), up])
 
 
 # The limbs whose child is a hinge: (the child's end joint, the side of local Y it bends to).

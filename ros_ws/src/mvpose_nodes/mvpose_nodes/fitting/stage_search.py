@@ -24,6 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from mvpose_nodes.body.geometry import cross
 from mvpose_nodes.body.kinematics import BONE_INDEX, BONES, forward_kinematics
 from mvpose_nodes.body.model import (JOINT_INDEX, LABEL_HEAD, LABEL_LEFT_LEG, LABEL_RIGHT_LEG, LABEL_TORSO,
                                      PARAMETER_INDEX)
@@ -149,12 +150,12 @@ def twist_excess(stage, frames, parameters):
     cosine = float(np.dot(reference, direction))
     if 1.0 + cosine < 1e-6:
         return float(aside)
-    rotation_axis = np.cross(reference, direction)
+    rotation_axis = cross(reference, direction)
     angle = np.arctan2(np.linalg.norm(rotation_axis), cosine)
     unit = rotation_axis / max(np.linalg.norm(rotation_axis), 1e-300)
-    swung = (neutral * np.cos(angle) + np.cross(unit, neutral) * np.sin(angle)
+    swung = (neutral * np.cos(angle) + cross(unit, neutral) * np.sin(angle)
              + unit * np.dot(unit, neutral) * (1 - np.cos(angle)))
-    twist = np.arctan2(np.dot(np.cross(swung, axis), direction), np.dot(swung, axis))
+    twist = np.arctan2(np.dot(cross(swung, axis), direction), np.dot(swung, axis))
     beyond = max(low - twist, 0.0) + max(twist - high, 0.0)
     return float((beyond * np.sin(min(abs(parameters[PARAMETER_INDEX[hinge]]), np.pi / 2))) ** 2 + aside)
 
