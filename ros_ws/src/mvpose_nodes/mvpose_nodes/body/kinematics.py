@@ -15,7 +15,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from mvpose_nodes.body.model import JOINT_INDEX, JOINT_NAMES, PARAMETER_INDEX, PARAMETER_NAMES
-from mvpose_nodes.body.geometry import cross, matrix_from_quaternion, normalize, quaternion_from_matrix, rotation_between
+from mvpose_nodes.body.geometry import (cross, matrix_from_quaternion, normalize, quaternion_from_matrix,
+                                        rotation_between)
 
 
 # Bone lengths as fractions of the stature (Winter's table: hip joint at 0.530 H, knee 0.285, ankle
