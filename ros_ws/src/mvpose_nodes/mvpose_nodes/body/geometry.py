@@ -12,11 +12,16 @@ PARALLEL_TOLERANCE = 1e-12  # |sin φ| below this: the two vectors are taken as 
 # routines (np.cross's and np.linalg.norm's axis handling) cost several times the arithmetic: the functions
 # here do the same arithmetic in the same order (the same bits) with fewer calls.
 
+def norm(vectors, axis=-1, keepdims=False):
+    """Euclidean lengths along `axis` of float arrays, as np.linalg.norm computes them along an axis."""
+    return np.sqrt(np.add.reduce(vectors * vectors, axis=axis, keepdims=keepdims))
+
+
 def normalize(vectors, axis=-1):
-    """Unit vectors along `axis` (zero vectors stay zero). The norm as np.linalg.norm's along an axis."""
+    """Unit vectors along `axis` (zero vectors stay zero)."""
     vectors = np.asarray(vectors, dtype=float)
-    norm = np.sqrt(np.add.reduce(vectors * vectors, axis=axis, keepdims=True))
-    return np.divide(vectors, norm, out=np.zeros_like(vectors), where=norm > 0)
+    length = norm(vectors, axis, keepdims=True)
+    return np.divide(vectors, length, out=np.zeros_like(vectors), where=length > 0)
 
 
 def cross(a, b):
@@ -39,7 +44,7 @@ def rotation_between(r, r_prime):
     ones a half turn about an axis perpendicular to r. Shapes (3,) or (N, 3) -> (4,) or (N, 4)."""
     r, r_prime = normalize(r), normalize(r_prime)
     normal = cross(r, r_prime)
-    sin_phi = np.sqrt(np.add.reduce(normal * normal, axis=-1))
+    sin_phi = norm(normal)
     cos_phi = np.clip(np.add.reduce(r * r_prime, axis=-1), -1.0, 1.0)
     phi = np.arctan2(sin_phi, cos_phi)
     axis = normalize(normal)

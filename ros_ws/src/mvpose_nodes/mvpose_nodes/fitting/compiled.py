@@ -63,9 +63,9 @@ class StagePack(NamedTuple):
     """One stage's search in arrays. indices (n,): the parameters searched; base (29,): the others'
     values; start, steps (n,) and low, high (n,) (±inf: no limit) for the priors; capsules (K,) bone
     indices, capsule_radius (K,) [m], capsule_terminal (K,) bool; assigned (V,) bool (the view has an
-    outline assignment), points (P, 2) [px] and point_view (P,) the assigned outline points, grouped by view
-    in view order; bones (B,) bone indices with labelled boundaries and bone_slot (B,) their MAP_LABELS slot; keypoint_view,
-    keypoint_joint (Q,), keypoint_xy (Q, 2) [px], keypoint_weight (Q,); the limbs' twist and lateral limits
+    outline assignment), points (P, 2) [px] and point_view (P,) the assigned outline points, grouped by
+    view in view order; bones (B,) bone indices with labelled boundaries and bone_slot (B,) their MAP_LABELS
+    slot; keypoint_view, keypoint_joint (Q,), keypoint_xy (Q, 2) [px], keypoint_weight (Q,); the limbs' twist and lateral limits
     (stage_search.twist_arrays: twist_bones (T,), twist_reference, twist_neutral (T, 3), twist_low,
     twist_high (T,) [rad], twist_hinge (T,), lateral_low, lateral_high (T,) [rad]); weights (10,): enclosure, outline,
     inside, outline scale, outline gate, boundary, keypoint, keypoint scale, smoothness, limit

@@ -151,8 +151,9 @@ def twist_excess(stage, frames, parameters):
     if 1.0 + cosine < 1e-6:
         return float(aside)
     rotation_axis = cross(reference, direction)
-    angle = np.arctan2(np.linalg.norm(rotation_axis), cosine)
-    unit = rotation_axis / max(np.linalg.norm(rotation_axis), 1e-300)
+    sine = np.linalg.norm(rotation_axis)
+    angle = np.arctan2(sine, cosine)
+    unit = rotation_axis / max(sine, 1e-300)
     swung = (neutral * np.cos(angle) + cross(unit, neutral) * np.sin(angle)
              + unit * np.dot(unit, neutral) * (1 - np.cos(angle)))
     twist = np.arctan2(np.dot(cross(swung, axis), direction), np.dot(swung, axis))
