@@ -5,11 +5,11 @@ import numpy as np
 import pytest
 from common import rendered_views
 
-from mvpose_nodes.body.model import JOINT_NAMES
+from mvpose_nodes.body.model import JOINT_NAMES, PARAMETER_NAMES
 from mvpose_nodes.body.camera import studio_rig
-from mvpose_nodes.body.kinematics import lengths_of
+from mvpose_nodes.body.kinematics import bone_lengths, forward_kinematics, lengths_of
 from mvpose_nodes.fitting.fitter import SkeletonFitter, View
-from mvpose_nodes.fitting.initialisation import stature, upright
+from mvpose_nodes.fitting.initialisation import stature, torso_below_the_head, upright
 from mvpose_nodes.fitting.settings import FitterSettings
 from mvpose_nodes.fitting.stage_search import KEYPOINT_JOINT
 
@@ -264,6 +264,37 @@ def test_a_person_seen_seated_first_is_measured_again_once_standing(cmu_walk):
     assert upright_joints(motion.joints[0] * [1.0, 1.0, 0.8])
     assert stature(seated_first.lengths) == pytest.approx(stature(standing_only.lengths), rel=0.01)
     assert seated_first.lengths == pytest.approx(standing_only.lengths, rel=0.01)
+
+
+def test_with_the_hands_raised_the_root_and_neck_are_put_below_the_head():
+    """Raised arms lift the silhouettes' centroid (the root keypoint) and the row where the silhouette widens
+    below the head (the neck keypoint): with a wrist above the neck and a foot on the floor, the triangulated
+    pelvis and neck and each view's root and neck keypoints are put below the head keypoint at the template's
+    shares of its height (initialisation.torso_below_the_head), for a person of the template's proportions
+    where they are; and such a frame set is not upright, so it measures nothing (the legs would be measured
+    from the lifted pelvis). With the hands down or both feet off the floor nothing moves."""
+    settings = FitterSettings()
+    rest, _ = forward_kinematics(np.zeros(len(PARAMETER_NAMES)), bone_lengths(1.75))
+    rest += [0.3, -0.2, 1.75 - rest[JOINT_NAMES.index('head'), 2]]   # the head's top 1.75 m above the floor
+    truth = {name: rest[JOINT_NAMES.index(name)] for name in ('pelvis', 'neck', 'head', 'left_ankle',
+                                                              'right_ankle', 'left_wrist', 'right_wrist')}
+    raised = dict(truth, pelvis=truth['pelvis'] + [0, 0, 0.25], neck=truth['neck'] + [0.1, 0.05, 0.1],
+                  right_wrist=truth['head'] + [0.1, 0, 0.2])
+    camera = studio_rig(cameras=[3])[0]
+
+    def pixel(position):
+        return camera.project(position[None])[0][0]
+    views = [View(camera, None, {'root': (*pixel(raised['pelvis']), 0.9), 'neck': (*pixel(raised['neck']), 0.8),
+                                 'head': (*pixel(truth['head']), 0.8)})]
+    placed_views, placed = torso_below_the_head(views, raised, settings)
+    for name, keypoint in (('pelvis', 'root'), ('neck', 'neck')):
+        assert placed[name] == pytest.approx(truth[name], abs=1e-9)
+        assert placed_views[0].keypoints[keypoint][:2] == pytest.approx(pixel(truth[name]), abs=1e-6)
+    assert [placed_views[0].keypoints[name][2] for name in ('root', 'neck', 'head')] == [0.9, 0.8, 0.8]
+    assert upright(truth, settings) and not upright(placed, settings)
+    for unchanged in (dict(raised, right_wrist=truth['right_wrist']),
+                      {name: position + [0, 0, 0.3] for name, position in raised.items()}):
+        assert torso_below_the_head(views, unchanged, settings) == (views, unchanged)
 
 
 @pytest.mark.parametrize('drop', [0.05, 0.13])
