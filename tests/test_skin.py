@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from mvpose_nodes.vision.skin import (BINS, SkinModel, SkinModelError, detect_skin, mask_counts, scores_of_counts,
-                                     skin_regions, surround_contrast, without_clothes)
+                                     skin_regions, surround_contrast)
 
 pytestmark = pytest.mark.pure
 
@@ -253,34 +253,6 @@ def test_surround_contrast_tells_a_hand_from_a_patch_of_cloth_of_its_colour():
     assert surround_contrast(image, skin, hand_region, silhouette, 3) == pytest.approx(chroma_distance, abs=2)
     # With no person around it (the silhouette is the region itself) there is nothing to compare with.
     assert surround_contrast(image, skin, hand_region, hand_mask, 3) is None
-
-
-def test_clothes_of_skin_colour_are_taken_out_and_the_face_and_hand_joined_to_them_kept(model):
-    # A shirt of a colour within the skin's spread (the model calls it skin) with a face above it and a hand
-    # at its side, touching it: one skin region, larger than any face or hand.
-    rng = np.random.default_rng(5)
-    image = colours(rng, 120 * 200, (40, 70, 180), 4).reshape(120, 200, 3)
-    rows, cols = np.mgrid[:120, :200]
-    shirt, face, hand = np.zeros((3, 120, 200), bool)
-    shirt[40:110, 50:150] = True
-    face[((rows - 25) / 16) ** 2 + ((cols - 100) / 12) ** 2 <= 1] = True
-    hand[70:90, 150:170] = True
-    shirt &= ~face
-    image[shirt] = colours(rng, shirt.sum(), (185, 150, 100), 3)
-    paint_skin(rng, image, face | hand)
-    person = shirt | face | hand
-    skin = detect_skin(model, image, region=person)
-    (joined,) = skin_regions(skin)
-    assert (skin & shirt).sum() > 0.9 * shirt.sum() and joined.area > 0.9 * person.sum()
-
-    kept = without_clothes(model, image, skin, clothes_area=0.5 * joined.area)
-    assert (kept & shirt).sum() < 0.05 * shirt.sum()
-    for part in (face, hand):
-        assert (kept & part).sum() > 0.7 * part.sum()
-    assert [region.area for region in skin_regions(kept)] == [pytest.approx(face.sum(), rel=0.3),
-                                                              pytest.approx(hand.sum(), rel=0.3)]
-    # A region no larger than clothes_area is left as it is.
-    assert np.array_equal(without_clothes(model, image, skin, clothes_area=joined.area), skin)
 
 
 def test_f1_score_of_known_masks():

@@ -30,7 +30,7 @@ from mvpose_nodes.body.model import LABEL_NONE
 from mvpose_nodes.vision.contour import ContourLabels, label_contour
 from mvpose_nodes.vision.silhouette import (BLUENESS_THRESHOLD, CLOSING_PX, OPENING_PX, chroma_key_foreground, clean_mask,
                                               component_box, components, silhouette_keypoints)
-from mvpose_nodes.vision.skin import detect_skin, skin_regions, surround_contrast, without_clothes
+from mvpose_nodes.vision.skin import detect_skin, skin_regions, surround_contrast
 
 ROLE_UNKNOWN, ROLE_FACE, ROLE_HAND, ROLE_FOREARM = range(4)   # SkinEllipse.ROLE_*
 SIDE_NONE, SIDE_LEFT, SIDE_RIGHT = range(3)                    # SkinEllipse.SIDE_*
@@ -44,9 +44,6 @@ NECK_BELOW_SKIN = 0.03   # base of the neck below the lowest skin of the neck, a
 NECK_BELOW_SHOULDERS = 0.04  # base of the neck below the row where the shoulders widen (silhouette.head_column)
 HEAD_REACH = 0.12        # a face's centre lies at most this share of the stature beside the head's top
 HAND_MAX_AREA = 0.02     # a hand's or forearm's skin region covers at most this share of the stature squared
-# A skin region over this share of the stature squared is clothes of skin's colour (skin.without_clothes): on
-# the suite's tuning renders no region of skin alone reached 0.025 (a face 0.01-0.017, a forearm up to 0.023).
-CLOTHES_MIN_AREA = 0.03
 HAND_MAX_LENGTH = 0.2    # ... and its ellipse's semi-major axis at most this share of the stature
 HAND_MIN_CONTRAST = 5.0  # ... and its a*b* differ by at least this from the person around it (skin.surround_contrast)
 SURROUND_BAND = 0.008    # the band around a skin region that surround_contrast compares it with, as a share of the stature
@@ -175,8 +172,6 @@ class FeatureExtractor:
             return Features(False, silhouette, skin, keypoints={n: Keypoint() for n in KEYPOINT_NAMES}, timings=timings)
         min_skin = max(10, int(s.skin_min_area_fraction * area)) // r ** 2   # [px of the reduced box]
         skin_crop = detect_skin(self.skin_model, crop, s.skin_threshold, region=person, min_area=min_skin)
-        skin_crop = without_clothes(self.skin_model, crop, skin_crop, CLOTHES_MIN_AREA * points.height ** 2,
-                                    min_area=min_skin)
         skin[y0:y1, x0:x1] = enlarged_mask(skin_crop, r)
         regions = skin_regions(skin_crop, min_area=min_skin)
         lap('skin')

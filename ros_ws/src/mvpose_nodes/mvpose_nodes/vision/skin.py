@@ -25,13 +25,6 @@ BINS = 32  # histogram levels per colour channel
 SHIFT = 3  # 8-bit channel value >> SHIFT = bin index (256 / BINS = 2**SHIFT)
 FORMAT_VERSION = 1  # of the .npz written by SkinModel.save
 DEFAULT_ALPHA = 0.05  # weight of the uniform prior: 5 % of each class's probability spread over every colour
-# without_clothes: a pixel of a region of clothes stays skin where log P(bin | skin) − log P(bin | region) is
-# above this; below 0 because the skin in the region is counted in the region's histogram too.
-CLOTHES_THRESHOLD = -1.0
-# ... and at least this far inside the region [px]: where the cloth meets other clothes its pixels blend
-# the two colours, which neither the skin's nor the region's histogram holds (a strip of brown trousers at
-# a grey shirt was taken for a hand).
-CLOTHES_RIM_PX = 2
 _SHAPE = (BINS, BINS, BINS)
 
 
@@ -45,14 +38,6 @@ def _bin_index(rgb):
     index |= levels[..., 1].astype(np.uint16) << (8 - SHIFT)
     index |= levels[..., 2]
     return index
-
-
-def log_probability(counts, alpha):
-    """log P(bin | class), float64 of counts' shape, from a class's pixel counts per bin, smoothed by a
-    uniform prior of weight alpha (SkinModel's docstring): uniform when there are no counts."""
-    total = counts.sum()
-    empirical = counts / total if total else np.full(counts.shape, 1.0 / counts.size)
-    return np.log((empirical + alpha / counts.size) / (1 + alpha))
 
 
 def _check_mask(mask, shape, name):
@@ -85,7 +70,6 @@ class SkinModel:
     background_counts: np.ndarray
     alpha: float = DEFAULT_ALPHA
     _table: np.ndarray = dataclasses.field(default=None, init=False, repr=False)
-    _skin_table: np.ndarray = dataclasses.field(default=None, init=False, repr=False)
 
     def __post_init__(self):
         self.skin_counts = np.asarray(self.skin_counts, dtype=np.float64)
@@ -104,16 +88,12 @@ class SkinModel:
     def log_likelihood(self):
         """(BINS, BINS, BINS) float32 table of L per RGB bin (class docstring), cached."""
         if self._table is None:
-            self._table = (self.skin_log_probability
-                           - log_probability(self.background_counts, self.alpha)).astype(np.float32)
+            def smoothed(counts):
+                total = counts.sum()
+                empirical = counts / total if total else np.full(_SHAPE, 1.0 / BINS ** 3)
+                return np.log((empirical + self.alpha / BINS ** 3) / (1 + self.alpha))
+            self._table = (smoothed(self.skin_counts) - smoothed(self.background_counts)).astype(np.float32)
         return self._table
-
-    @property
-    def skin_log_probability(self):
-        """(BINS, BINS, BINS) float64 table of log P(bin | skin) (class docstring), cached."""
-        if self._skin_table is None:
-            self._skin_table = log_probability(self.skin_counts, self.alpha)
-        return self._skin_table
 
     def likelihood(self, rgb):
         """L per pixel, (H, W) float32, of an RGB uint8 (H, W, 3) image, by table look-up
@@ -130,14 +110,14 @@ class SkinModel:
         _check_mask(valid, index.shape, 'valid_mask')
         for counts, selected in ((self.skin_counts, valid & skin_mask), (self.background_counts, valid & ~skin_mask)):
             counts += np.bincount(index[selected], minlength=BINS ** 3).reshape(_SHAPE)
-        self._table = self._skin_table = None
+        self._table = None
         return self
 
     def merge(self, other):
         """Add the counts of another SkinModel (e.g. one trained in another process). Returns self."""
         self.skin_counts += other.skin_counts
         self.background_counts += other.background_counts
-        self._table = self._skin_table = None
+        self._table = None
         return self
 
     def save(self, path):
@@ -204,16 +184,8 @@ def detect_skin(model, rgb, threshold=0.0, region=None, min_area=30, opening=1, 
         margin = 2 * (opening + closing)
         window = (slice(max(y - margin, 0), min(y + h + margin, height)),
                   slice(max(x - margin, 0), min(x + w + margin, width)))
+    skin = (model.likelihood(rgb[window]) > threshold).view(np.uint8)
     inside = None if region is None else region[window]
-    mask = np.zeros((height, width), bool)
-    mask[window] = _cleaned(model.likelihood(rgb[window]) > threshold, inside, opening, closing, min_area)
-    return mask
-
-
-def _cleaned(skin, inside, opening, closing, min_area):
-    """detect_skin's clean-up of a bool (H, W) mask of skin colours: kept inside the bool (H, W) `inside`
-    (None: everywhere), opened, closed, kept inside again and regions under min_area px dropped."""
-    skin = skin.view(np.uint8)
     if inside is not None:
         skin &= inside
     for operation, radius in ((cv2.MORPH_OPEN, opening), (cv2.MORPH_CLOSE, closing)):
@@ -227,42 +199,9 @@ def _cleaned(skin, inside, opening, closing, min_area):
         large = areas >= min_area
         large[0] = False  # label 0 is the background
         skin = large[labels]
-    return skin
-
-
-def without_clothes(model, rgb, skin, clothes_area, threshold=CLOTHES_THRESHOLD, min_area=30, opening=1, closing=2):
-    """The bool (H, W) skin mask of detect_skin with clothes of skin's colour taken out (beyond paper 000,
-    whose people wear no such clothes). rgb: the RGB uint8 (H, W, 3) image; clothes_area [px]: a region of
-    the mask larger than this is larger than any face, hand or forearm can be, so clothes make it up (a
-    beige shirt, brown trousers) and any skin touching them is joined to them.
-
-    Such a region's pixels are told apart again with its own colours for the other class: the region's
-    histogram (its pixels counted per bin, most of them the cloth's, smoothed as the model's are,
-    log_probability) takes the place of the non-skin one, and a pixel stays skin where
-    log P(bin | skin) − log P(bin | region) > threshold and it lies CLOTHES_RIM_PX inside the region; the
-    pixels kept are cleaned up as detect_skin's (opening, closing, min_area), inside the region. A face or
-    hand of a skin tone unlike the cloth's keeps most of its pixels: in 8 tuning cases of the suite (seeds
-    1–6) whose skin masks held clothes (frame 25, three cameras each) 79 % of the true skin stayed and 95 %
-    of the clothes went. Regions up to clothes_area are returned as they are."""
-    labels, areas = components(skin)
-    large = np.flatnonzero(areas > clothes_area)
-    large = large[large != 0]
-    if not len(large):
-        return skin
-    skin = skin.copy()
-    index = _bin_index(rgb)
-    skin_table = model.skin_log_probability.ravel()
-    for label in large:
-        x, y, w, h = component_box(labels, label)
-        window = (slice(y, y + h), slice(x, x + w))
-        region = labels[window] == label
-        bins = index[window][region]
-        own = log_probability(np.bincount(bins, minlength=BINS ** 3).astype(np.float64), model.alpha)
-        kept = np.zeros(region.shape, bool)
-        kept[region] = skin_table[bins] - own[bins] > threshold
-        kept &= cv2.erode(region.view(np.uint8), _disk(CLOTHES_RIM_PX), borderValue=1).view(bool)
-        skin[window][region] = _cleaned(kept, region, opening, closing, min_area)[region]
-    return skin
+    mask = np.zeros((height, width), bool)
+    mask[window] = skin
+    return mask
 
 
 @dataclasses.dataclass(eq=False)
