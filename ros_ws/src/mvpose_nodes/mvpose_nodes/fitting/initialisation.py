@@ -135,13 +135,13 @@ def consistent_evidence(views, found, settings):
 def torso_below_the_head(views, found, settings):
     """(views, joints) with the root and neck where they are when the hands are raised (hands_raised): the
     silhouettes' centroid, the root keypoint, is lifted with the arms, and the neck keypoint, on the row
-    where the silhouette widens below the head, moves with the raised upper arms (on the suite's tuning
-    cases that start with the hands above the neck, the start's pelvis was 0.26 m high, its neck 0.24 m
-    off, and every labelling's fit with them). The head keypoint stays right (the silhouette's middle
-    column): standing with a foot on the floor (or none seen), the pelvis and the neck are put below it at the
-    template's shares of its height (a person stands upright to raise the hands), and each view's root and
-    neck keypoints at their projections, with the same confidence. Otherwise the views and joints `found`
-    as they are."""
+    where the silhouette widens below the head, moves with the raised upper arms (on the suite's seed 2
+    case 9, a tuning case that starts with the hands overhead, the triangulated pelvis was 0.27 m high and
+    the neck 0.24 m off, and every labelling's fit with them). The head keypoint stays right (the
+    silhouette's middle column): standing with a foot on the floor (or none seen), the pelvis and the neck
+    are put below it at the template's shares of its height (a person stands upright to raise the hands),
+    and each view's root and neck keypoints at their projections, with the same confidence. Otherwise the
+    views and joints `found` as they are."""
     ankles = [found[n][2] for n in ('left_ankle', 'right_ankle') if n in found]
     height = found['head'][2]
     if not hands_raised(found) or (ankles and not on_the_floor(min(ankles), height, settings.ankle_height)):
