@@ -142,19 +142,22 @@ def torso_below_the_head(views, found, settings):
     are put below it at the template's shares of its height (a person stands upright to raise the hands),
     and each view's root and neck keypoints at their projections, with the same confidence. Otherwise the
     views and joints `found` as they are."""
-    ankles = [found[n][2] for n in ('left_ankle', 'right_ankle') if n in found]
+    if not hands_raised(found):
+        return views, found
     height = found['head'][2]
-    if not hands_raised(found) or (ankles and not on_the_floor(min(ankles), height, settings.ankle_height)):
+    ankles = [found[n][2] for n in ('left_ankle', 'right_ankle') if n in found]
+    if ankles and not on_the_floor(min(ankles), height, settings.ankle_height):
         return views, found
     shares = {'root': 1 - LENGTH_FRACTIONS['head'] - LENGTH_FRACTIONS['spine'], 'neck': 1 - LENGTH_FRACTIONS['head']}
     placed = {name: np.r_[found['head'][:2], share * height] for name, share in shares.items()}
+    positions = np.array(list(placed.values()))
     lowered = []
     for view in views:
+        pixels, _ = view.camera.project(positions)
         keypoints = dict(view.keypoints)
-        for name, position in placed.items():
+        for name, pixel in zip(placed, pixels):
             if name in keypoints:
-                pixels, _ = view.camera.project(position[None])
-                keypoints[name] = (*pixels[0], keypoints[name][2])
+                keypoints[name] = (*pixel, keypoints[name][2])
         lowered.append(replace(view, keypoints=keypoints))
     return lowered, dict(found, pelvis=placed['root'], neck=placed['neck'])
 
