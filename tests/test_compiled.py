@@ -2,6 +2,7 @@
 (StageSearch.stage_cost plus the search's priors, kinematics.forward_kinematics) to 1e-9 on random poses,
 with the evidence of real features: studio renders of the CMU walk through the feature pipeline (labelled
 boundaries, outlines, keypoints), in a rig with and without lens distortion."""
+import dataclasses
 import math
 
 import numpy as np
@@ -84,7 +85,7 @@ def test_compiled_stage_objective_equals_the_reference_on_random_poses(walk_fram
     compared = 0
     for _ in range(POSES):
         start = true_parameters + rng.normal(scale=0.1, size=29)
-        assigned = search.outline_assignment(stage, start, views)
+        assigned = search.outline_assignment(stage, start, views, frame)
         pack = search.stage_pack(stage, start, views, assigned, priors=True)
         trial = start.copy()
         trial[indices] += rng.normal(scale=0.4, size=len(indices))   # also beyond the joint limits
@@ -116,7 +117,7 @@ def test_compiled_nelder_mead_takes_scipys_steps(walk_frame, stage):
     indices = stage_indices(stage)
     for budget in (1000, 40):
         start = inverse_kinematics(truth) + rng.normal(scale=0.1, size=29)
-        pack = search.stage_pack(stage, start, views, search.outline_assignment(stage, start, views), priors=True)
+        pack = search.stage_pack(stage, start, views, search.outline_assignment(stage, start, views, frame), priors=True)
         flags = np.zeros(len(views), bool)
         simplex = np.vstack([start[indices], start[indices] + np.diag(pack.steps)])
         reference = minimize(stage_objective, start[indices], (pack, frame, search.bone_lengths, FRACTIONS, SAMPLES, flags),
@@ -168,6 +169,34 @@ def test_nearest_capsules_equal_the_minimum_of_the_residuals():
     assert np.allclose(found, residuals.min(axis=1), rtol=1e-12, atol=1e-9)
 
 
+def test_the_outline_assignment_equals_the_reference_on_random_poses(walk_frame):
+    """compiled.outline_nearest (the pose's capsules in every view at once) gives each outline point the
+    nearest capsule and gate verdict that the numpy reference gives view by view: the pose's joints
+    projected (body.camera.Camera.project), its capsules (projected_capsules) and nearest_capsules;
+    also for a view without an outline."""
+    from mvpose_nodes.fitting.compiled import nearest_capsules
+    from mvpose_nodes.fitting.stage_search import CAPSULE_TERMINAL, projected_capsules
+    truth, views = walk_frame
+    views = views + [dataclasses.replace(views[0], outline=None)]
+    search = StageSearch(FitterSettings(), bone_lengths(1.75))
+    frame = pack_frame(views)
+    rng = np.random.default_rng(11)
+    gated = 0
+    for _ in range(POSES):
+        parameters = inverse_kinematics(truth) + rng.normal(scale=0.2, size=29)
+        joints, _ = forward_kinematics(parameters, search.lengths)
+        for view, (capsule, within) in zip(views, search.outline_nearest(parameters, frame)):
+            if view.outline is None:
+                assert capsule is None and within is None
+                continue
+            reference, residuals = nearest_capsules(view.outline.points, *projected_capsules(
+                view, *view.camera.project(joints)), CAPSULE_TERMINAL)
+            assert np.array_equal(capsule, reference)
+            assert np.array_equal(within, np.abs(residuals) < search.settings.outline_gate)
+            gated += np.count_nonzero(~within)
+    assert gated, 'some points lie beyond the gate of every capsule'
+
+
 def test_a_segment_inside_its_maps_is_read_as_point_by_point_to_the_bit():
     """The look-ups of a segment that lies inside a part's maps, both sides at once and without clamping
     (compiled._inside_lookups, which the objective uses when _segment_inside says so), equal _bilinear's at
@@ -210,12 +239,13 @@ def test_outline_points_out_of_view_order_are_refused(walk_frame):
     truth, views = walk_frame
     search = StageSearch(FitterSettings(), bone_lengths(1.75))
     parameters = inverse_kinematics(truth)
-    pack = search.stage_pack('torso', parameters, views, search.outline_assignment('torso', parameters, views),
+    frame = pack_frame(views)
+    pack = search.stage_pack('torso', parameters, views, search.outline_assignment('torso', parameters, views, frame),
                              priors=True)
     assert len(set(pack.point_view.tolist())) > 1
     indices = stage_indices('torso')
     flags = np.zeros(len(views), bool)
-    stage_objective(parameters[indices], pack, pack_frame(views), search.bone_lengths, FRACTIONS, SAMPLES, flags)
+    stage_objective(parameters[indices], pack, frame, search.bone_lengths, FRACTIONS, SAMPLES, flags)
     shuffled = pack._replace(point_view=pack.point_view[::-1].copy(), points=pack.points[::-1].copy())
     with pytest.raises(ValueError, match='grouped by view'):
-        stage_objective(parameters[indices], shuffled, pack_frame(views), search.bone_lengths, FRACTIONS, SAMPLES, flags)
+        stage_objective(parameters[indices], shuffled, frame, search.bone_lengths, FRACTIONS, SAMPLES, flags)

@@ -41,7 +41,9 @@ class FramePack(NamedTuple):
     (V, 4) bool (the part has both sides), boundary (M,) float32 the views' BoundaryDistances.buffer (one
     after the other, unless they share one), boundary_at (V, 4, 2) each side's map's first index in it,
     boundary_shape (V, 4, 2) (height, width) on the MAP_COARSENING grid and boundary_origin (V, 4, 2)
-    (x0, y0) [px] of the part's maps (its two sides share one box), boundary_width (V, 4) [px]."""
+    (x0, y0) [px] of the part's maps (its two sides share one box), boundary_width (V, 4) [px]. The views'
+    outline points (objective.Outline.points, for the assignment: outline_nearest): outline_x, outline_y
+    (P,) [px] one view's after the other, outline_range (V, 2) each view's first and last + 1 index."""
     K: np.ndarray
     R: np.ndarray
     t: np.ndarray
@@ -57,6 +59,9 @@ class FramePack(NamedTuple):
     boundary_shape: np.ndarray
     boundary_origin: np.ndarray
     boundary_width: np.ndarray
+    outline_x: np.ndarray
+    outline_y: np.ndarray
+    outline_range: np.ndarray
 
 
 class StagePack(NamedTuple):
@@ -146,6 +151,9 @@ def pack_frame(views):
             origin[v, k], shape[v, k] = distances.origins[label], distances.maps[(label, SIDE_A)].shape
             at[v, k] = (boundary_start[v] + distances.offsets[(label, SIDE_A)],
                         boundary_start[v] + distances.offsets[(label, SIDE_B)])
+    points = [v.outline.points if v.outline is not None else np.zeros((0, 2)) for v in views]
+    ends = np.cumsum([len(p) for p in points], dtype=np.int64)
+    points = np.concatenate(points).reshape(-1, 2) if points else np.zeros((0, 2))
     return FramePack(
         np.array([v.camera.K for v in views], np.float64).reshape(count, 3, 3),
         np.array([v.camera.R for v in views], np.float64).reshape(count, 3, 3),
@@ -154,13 +162,20 @@ def pack_frame(views):
         np.array([v.outline is not None for v in views], np.bool_), outside, np.array(outside_at, np.int64),
         np.array([v.outline.outside.shape if v.outline is not None else (0, 0) for v in views], np.int64).reshape(count, 2),
         np.array([v.outline.origin if v.outline is not None else (0, 0) for v in views], np.float64).reshape(count, 2),
-        slot, boundary, at, shape, origin, width)
+        slot, boundary, at, shape, origin, width, np.ascontiguousarray(points[:, 0], np.float64),
+        np.ascontiguousarray(points[:, 1], np.float64), np.column_stack([np.r_[0, ends[:-1]], ends]).astype(np.int64))
 
 
 @njit(cache=True, nogil=True, error_model='numpy')
 def _project(frame, view, joints):
     """body.camera.Camera.project of joints (J, 3) in view `view`: pixels (J, 2), depths (J,)."""
-    K, R, t, D = frame.K[view], frame.R[view], frame.t[view], frame.D[view]
+    return _project_camera(frame.K[view], frame.R[view], frame.t[view], frame.D[view], joints)
+
+
+@njit(cache=True, nogil=True, error_model='numpy')
+def _project_camera(K, R, t, D, joints):
+    """body.camera.Camera.project of joints (J, 3) by the camera K, R (3, 3), t (3,), D (5,): pixels (J, 2),
+    depths (J,)."""
     count = joints.shape[0]
     pixels, depth = np.empty((count, 2)), np.empty(count)
     distorted = D[0] != 0 or D[1] != 0 or D[2] != 0 or D[3] != 0 or D[4] != 0
@@ -417,3 +432,33 @@ def nearest_capsules(points, starts, ends, radii, terminal):
             if distances[p] < residual[p]:
                 nearest[p], residual[p] = k, distances[p]
     return nearest, residual
+
+
+@njit(cache=True, nogil=True, error_model='numpy')
+def outline_nearest(parameters, bone_lengths, capsule_radius, capsule_terminal, gate, K, R, t, D, outline_x,
+                    outline_y, outline_range):
+    """For each outline point of a frame's views (FramePack's outline_x, outline_y, outline_range and
+    cameras K, R, t, D) its nearest of the pose's 14 projected capsules (stage_search.projected_capsules of
+    every bone: capsule_radius (14,) [m] at the bone's mean depth, capsule_terminal (14,) bool) and whether
+    it lies within `gate` [px] of it, as nearest_capsules gives them view by view: (indices into BONES (P,)
+    int64, within (P,) bool). The pose: parameters (29,), bone_lengths (14,) [m]."""
+    joints = forward_joints(parameters, bone_lengths)
+    count = len(outline_x)
+    nearest, within = np.zeros(count, np.int64), np.zeros(count, np.bool_)
+    residual, distances = np.full(count, np.inf), np.empty(count)
+    for v in range(K.shape[0]):
+        first, last = outline_range[v, 0], outline_range[v, 1]
+        if last <= first:
+            continue
+        pixels, depth = _project_camera(K[v], R[v], t[v], D[v], joints)
+        for k in range(len(capsule_radius)):
+            a, b = CHAIN_START[k], CHAIN_END[k]
+            radius = capsule_radius[k] * K[v, 0, 0] / max(0.5 * (depth[a] + depth[b]), 0.1)
+            _capsule_residuals(outline_x[first:last], outline_y[first:last], pixels[a], pixels[b], radius,
+                               capsule_terminal[k], distances[first:last])
+            for p in range(first, last):
+                if distances[p] < residual[p]:
+                    nearest[p], residual[p] = k, distances[p]
+        for p in range(first, last):
+            within[p] = abs(residual[p]) < gate
+    return nearest, within

@@ -113,7 +113,7 @@ def search(simplex, xatol, fatol, maxfev, bone_lengths, fractions, samples, used
            points, point_view, bones, bone_slot, keypoint_view, keypoint_joint, keypoint_xy, keypoint_weight,
            twist_bones, twist_reference, twist_neutral, twist_low, twist_high, twist_hinge, lateral_low, lateral_high,
            weights, K, R, t, D, has_outline, outside, outside_at, outside_shape, outside_origin, slot, boundary,
-           boundary_at, boundary_shape, boundary_origin, boundary_width):
+           boundary_at, boundary_shape, boundary_origin, boundary_width, outline_x, outline_y, outline_range):
     """nelder_mead with the StagePack and FramePack given field by field: search(..., *stage, *frame).
     With maxfev 1 it evaluates the simplex's first vertex and stops: one evaluation of the objective."""
     stage = StagePack(indices, base, start, steps, low, high, capsules, capsule_radius, capsule_terminal,
@@ -121,6 +121,6 @@ def search(simplex, xatol, fatol, maxfev, bone_lengths, fractions, samples, used
                       keypoint_weight, twist_bones, twist_reference, twist_neutral, twist_low, twist_high, twist_hinge,
                       lateral_low, lateral_high, weights)
     frame = FramePack(K, R, t, D, has_outline, outside, outside_at, outside_shape, outside_origin, slot, boundary,
-                      boundary_at, boundary_shape, boundary_origin, boundary_width)
+                      boundary_at, boundary_shape, boundary_origin, boundary_width, outline_x, outline_y, outline_range)
     return nelder_mead(simplex, xatol, fatol, maxfev, stage, frame, bone_lengths, fractions, samples, used)
 

@@ -295,7 +295,7 @@ class SkeletonFitter:
         joints, frames = forward_kinematics(parameters, self.stages.lengths)
         oriented = [oriented_view(view, joints) for view in views]
         frame = pack_frame(oriented)
-        nearest = self.stages.outline_nearest(parameters, oriented, joints)
+        nearest = self.stages.outline_nearest(parameters, frame)
         cost = sum(self.stages.posed_cost(stage, parameters, oriented, frame, nearest, frames) for stage in STAGE_NAMES)
         if self.face_right is not None:
             cost *= 1 + self.settings.face_cost_share * face_away(joints, self.face_right)
@@ -327,7 +327,7 @@ class SkeletonFitter:
             if kept and stage in kept:
                 results.append(kept[stage])
                 continue
-            assigned = self.stages.outline_assignment(stage, parameters, oriented)
+            assigned = self.stages.outline_assignment(stage, parameters, oriented, frame)
             if stage == 'torso' and canonical:
                 def search_turned(yaw):
                     turned = parameters.copy()
@@ -348,7 +348,7 @@ class SkeletonFitter:
                     alternative[stage_indices(stage)] = start[stage_indices(stage)]
                     # From a canonical start the outline is assigned from that pose: a raised arm's outline
                     # is nobody's in a pose with the arm down, and nothing would pull the arm up to it.
-                    own = self.stages.outline_assignment(stage, alternative, oriented) if afresh else assigned
+                    own = self.stages.outline_assignment(stage, alternative, oriented, frame) if afresh else assigned
                     return self.stages.search(stage, alternative, oriented, own, frame)
                 outcomes = self.each(search_from, [None] + alternatives[stage])
                 def rank(outcome):   # searches with their own outline assignments: one footing
@@ -496,4 +496,5 @@ def warm_up():
              for number, side in ((1, -1), (2, 1))]
     parameters = inverse_kinematics(forward_kinematics(np.r_[0.0, 0.0, 1.0, np.zeros(26)], lengths)[0])
     stages = StageSearch(FitterSettings(), lengths)
-    stages.search('torso', parameters, views, stages.outline_assignment('torso', parameters, views), pack_frame(views))
+    frame = pack_frame(views)
+    stages.search('torso', parameters, views, stages.outline_assignment('torso', parameters, views, frame), frame)

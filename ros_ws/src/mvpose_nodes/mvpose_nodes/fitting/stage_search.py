@@ -28,7 +28,7 @@ from mvpose_nodes.body.geometry import cross
 from mvpose_nodes.body.kinematics import BONE_INDEX, BONES, forward_kinematics
 from mvpose_nodes.body.model import (JOINT_INDEX, LABEL_HEAD, LABEL_LEFT_LEG, LABEL_RIGHT_LEG, LABEL_TORSO,
                                      PARAMETER_INDEX)
-from mvpose_nodes.fitting.compiled import LABEL_SLOT, StagePack, fractions_arrays, nearest_capsules
+from mvpose_nodes.fitting.compiled import LABEL_SLOT, StagePack, fractions_arrays, outline_nearest
 from mvpose_nodes.fitting.compiled_search import search
 from mvpose_nodes.fitting.compiled_kinematics import bone_length_array
 from mvpose_nodes.fitting.limb_limits import LATERAL_STIFFNESS
@@ -251,32 +251,27 @@ class StageSearch:
                       settings.outline_gate, settings.boundary_weight, settings.keypoint_weight, settings.keypoint_scale,
                       settings.smoothness_weight if priors else 0.0, settings.limit_weight if priors else 0.0]))
 
-    def outline_assignment(self, stage, parameters, views, nearest=None):
+    def outline_assignment(self, stage, parameters, views, frame, nearest=None):
         """Per view, the outline points (M, 2) [px] that the stage's capsules explain in the pose
         `parameters`: those nearer to one of them than to any other capsule, within outline_gate (None for
         a view without an outline). Fixed for the stage's search, so that the torso is not pulled to
-        explain the limbs, which are still where they were in the last frame. nearest: outline_nearest of
-        the same pose and views, when the caller assigns several stages from it."""
-        nearest = self.outline_nearest(parameters, views) if nearest is None else nearest
+        explain the limbs, which are still where they were in the last frame. frame: the views'
+        compiled.FramePack; nearest: outline_nearest of the same pose and views, when the caller assigns
+        several stages from it."""
+        nearest = self.outline_nearest(parameters, frame) if nearest is None else nearest
         mine = STAGE_CAPSULE_MASK[stage]
         return [None if view.outline is None else view.outline.points[mine[capsule] & within]
                 for view, (capsule, within) in zip(views, nearest)]
 
-    def outline_nearest(self, parameters, views, joints=None):
-        """Per view, for each outline point, the index (into BONES) of the capsule nearest to it in the pose
-        `parameters` (29,) and whether it lies within outline_gate of it: (N,) int, (N,) bool ((None, None)
-        for a view without an outline). joints: the pose's forward_kinematics joints, if the caller has them."""
-        if joints is None:
-            joints, _ = forward_kinematics(parameters, self.lengths)
-        nearest = []
-        for view in views:
-            if view.outline is None:
-                nearest.append((None, None))
-                continue
-            capsule, residuals = nearest_capsules(view.outline.points, *projected_capsules(view, *view.camera.project(joints)),
-                                                  CAPSULE_TERMINAL)
-            nearest.append((capsule, np.abs(residuals) < self.settings.outline_gate))
-        return nearest
+    def outline_nearest(self, parameters, frame):
+        """Per view of `frame` (compiled.FramePack), for each outline point, the index (into BONES) of the
+        capsule nearest to it in the pose `parameters` (29,) and whether it lies within outline_gate of it:
+        (N,) int, (N,) bool ((None, None) for a view without an outline); compiled.outline_nearest."""
+        nearest, within = outline_nearest(np.asarray(parameters, float), self.bone_lengths, CAPSULE_RADIUS,
+                                          CAPSULE_TERMINAL, self.settings.outline_gate, frame.K, frame.R, frame.t,
+                                          frame.D, frame.outline_x, frame.outline_y, frame.outline_range)
+        return [(nearest[first:last], within[first:last]) if present else (None, None)
+                for present, (first, last) in zip(frame.has_outline, frame.outline_range)]
 
     def explained_cost(self, stage, parameters, views, frame):
         """A limb stage's searches from different starts, each with its own outline assignment, compared on one
@@ -286,8 +281,8 @@ class StageSearch:
         leaves a raised arm's outline unexplained costs more than the raised arm explaining it; within one
         assignment (the stage's own objective) such points are left out and cost nothing."""
         settings = self.settings
-        joints, frames = forward_kinematics(parameters, self.lengths)
-        nearest = self.outline_nearest(parameters, views, joints)
+        _, frames = forward_kinematics(parameters, self.lengths)
+        nearest = self.outline_nearest(parameters, frame)
         unexplained = sum(int(np.count_nonzero(~within)) for _, within in nearest if within is not None)
         capped = settings.outline_weight * OUTLINE_STEP * cauchy_loss(settings.outline_gate, settings.outline_scale)
         return self.posed_cost(stage, parameters, views, frame, nearest, frames) + capped * unexplained
@@ -296,7 +291,7 @@ class StageSearch:
         """The stage's objective at the pose `parameters` (29,) with the outline assigned from that pose
         (`nearest`: its outline_nearest), without the smoothness prior, plus its joint limits (frames: the
         pose's forward_kinematics bone frames, if the caller has them)."""
-        assigned = self.outline_assignment(stage, parameters, views, nearest)
+        assigned = self.outline_assignment(stage, parameters, views, frame, nearest)
         return (self.compiled_cost(stage, parameters, views, assigned, frame)[0]
                 + self.limit_cost(stage, parameters, frames))
 
