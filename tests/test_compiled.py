@@ -98,6 +98,8 @@ def test_compiled_stage_objective_equals_the_reference_on_random_poses(walk_fram
         assert np.flatnonzero(flags).tolist() == used
         without_priors, used_views = search.compiled_cost(stage, trial, views, assigned, frame)
         assert without_priors == pytest.approx(search.stage_cost(stage, trial, views, assigned)[0], rel=RELATIVE)
+        with_limits, _ = search.compiled_cost(stage, trial, views, assigned, frame, limits=True)
+        assert with_limits == pytest.approx(without_priors + search.limit_cost(stage, trial), rel=RELATIVE)
         compared += reference > 0
     assert compared == POSES, 'every pose has evidence in this stage'
 

@@ -292,11 +292,11 @@ class SkeletonFitter:
         and the outline assigned from it; raised by up to face_cost_share as far as the pose's hips face away
         from the face the views see (face_right; hypotheses.face_away), and by foot_weight per px² of its feet
         outside the silhouettes (hypotheses.feet_outside)."""
-        joints, frames = forward_kinematics(parameters, self.stages.lengths)
+        joints, _ = forward_kinematics(parameters, self.stages.lengths)
         oriented = [oriented_view(view, joints) for view in views]
         frame = pack_frame(oriented)
         nearest = self.stages.outline_nearest(parameters, frame)
-        cost = sum(self.stages.posed_cost(stage, parameters, oriented, frame, nearest, frames) for stage in STAGE_NAMES)
+        cost = sum(self.stages.posed_cost(stage, parameters, oriented, frame, nearest) for stage in STAGE_NAMES)
         if self.face_right is not None:
             cost *= 1 + self.settings.face_cost_share * face_away(joints, self.face_right)
         if self.settings.foot_weight:

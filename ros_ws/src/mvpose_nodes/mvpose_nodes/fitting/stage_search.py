@@ -100,6 +100,7 @@ CAPSULE_RADIUS = np.array([CAPSULE_RADII[bone.name.replace('left_', '').replace(
 CAPSULE_TERMINAL = np.array([bone.name.endswith(TERMINAL_BONES) for bone in BONES])
 FRACTIONS, SAMPLES = fractions_arrays()
 WITHOUT_PRIORS = np.array([1.0] * 8 + [0.0, 0.0])   # StagePack.weights' factors: smoothness and limits off
+WITHOUT_SMOOTHNESS = np.array([1.0] * 8 + [0.0, 1.0])   # and smoothness off, limits on
 STAGE_CAPSULE_INDEX = {stage: np.array([BONE_INDEX[name] for name in names]) for stage, names in STAGE_CAPSULES.items()}
 STAGE_CAPSULE_MASK = {stage: np.isin(np.arange(len(BONES)), index) for stage, index in STAGE_CAPSULE_INDEX.items()}
 
@@ -207,13 +208,15 @@ class StageSearch:
         final, used = self.compiled_cost(stage, fitted, views, assigned, frame, pack)
         return fitted, StageResult(stage, final, int(evaluations), sorted(views[i].camera.number for i in used), True)
 
-    def compiled_cost(self, stage, parameters, views, assigned, frame, pack=None):
-        """stage_cost (without the priors) by the compiled objective at `parameters` (29,): (cost, indices of
-        the views that contributed). pack: a stage_pack of this stage, views and assignment to reuse (its
-        start and priors do not matter here), or None to make one."""
+    def compiled_cost(self, stage, parameters, views, assigned, frame, pack=None, limits=False):
+        """stage_cost (without the priors; with `limits`, plus limit_cost) by the compiled objective at
+        `parameters` (29,): (cost, indices of the views that contributed). pack: a stage_pack of this stage,
+        views and assignment to reuse (its start does not matter here; with `limits`, one made with priors), or None
+        to make one."""
         if pack is None:
-            pack = self.stage_pack(stage, parameters, views, assigned, priors=False)
-        pack = pack._replace(base=np.asarray(parameters, float).copy(), weights=pack.weights * WITHOUT_PRIORS)
+            pack = self.stage_pack(stage, parameters, views, assigned, priors=limits)
+        factors = WITHOUT_SMOOTHNESS if limits else WITHOUT_PRIORS
+        pack = pack._replace(base=np.asarray(parameters, float).copy(), weights=pack.weights * factors)
         used = np.zeros(len(views), np.bool_)
         vertices = np.tile(parameters[pack.indices], (len(pack.indices) + 1, 1))   # a search of one evaluation
         _, cost, _ = search(vertices, 0.0, 0.0, 1, self.bone_lengths, FRACTIONS, SAMPLES, used, *pack, *frame)
@@ -281,19 +284,16 @@ class StageSearch:
         leaves a raised arm's outline unexplained costs more than the raised arm explaining it; within one
         assignment (the stage's own objective) such points are left out and cost nothing."""
         settings = self.settings
-        _, frames = forward_kinematics(parameters, self.lengths)
         nearest = self.outline_nearest(parameters, frame)
         unexplained = sum(int(np.count_nonzero(~within)) for _, within in nearest if within is not None)
         capped = settings.outline_weight * OUTLINE_STEP * cauchy_loss(settings.outline_gate, settings.outline_scale)
-        return self.posed_cost(stage, parameters, views, frame, nearest, frames) + capped * unexplained
+        return self.posed_cost(stage, parameters, views, frame, nearest) + capped * unexplained
 
-    def posed_cost(self, stage, parameters, views, frame, nearest, frames=None):
+    def posed_cost(self, stage, parameters, views, frame, nearest):
         """The stage's objective at the pose `parameters` (29,) with the outline assigned from that pose
-        (`nearest`: its outline_nearest), without the smoothness prior, plus its joint limits (frames: the
-        pose's forward_kinematics bone frames, if the caller has them)."""
+        (`nearest`: its outline_nearest), without the smoothness prior, plus its joint limits (limit_cost)."""
         assigned = self.outline_assignment(stage, parameters, views, frame, nearest)
-        return (self.compiled_cost(stage, parameters, views, assigned, frame)[0]
-                + self.limit_cost(stage, parameters, frames))
+        return self.compiled_cost(stage, parameters, views, assigned, frame, limits=True)[0]
 
     def limit_cost(self, stage, parameters, frames=None):
         """The stage's joint limits at `parameters` (29,): limit_weight × the squared excess [rad²] of its
