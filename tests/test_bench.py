@@ -96,6 +96,11 @@ def test_cpu_split_from_two_diagnostics_statuses():
     assert split == pytest.approx({'sync': 0.5, 'fit': 5.0, 'publish': 0.25,
                                    'rclpy (take, deserialise, executor)': 8.0 - 5.75,   # threads 2 + 6
                                    'DDS and other threads': 10.0 - 8.0, 'total': 10.0})
+    # A thread pool's CPU (the fitter's hypotheses) is its own, not DDS's.
+    pooled = bench.cpu_split({**before, 'pool/hypotheses': 1.0}, {**after, 'pool/hypotheses': 2.5})
+    assert pooled['hypotheses pool'] == pytest.approx(1.5)
+    assert pooled['DDS and other threads'] == pytest.approx(10.0 - 8.0 - 1.5)
+    assert pooled['rclpy (take, deserialise, executor)'] == pytest.approx(8.0 - 5.75)
 
 
 def test_backlog_growth_compares_the_first_and_last_quarter():

@@ -4,11 +4,12 @@ skeleton_fitter skipping stale frame sets in test_skeleton_fitter_node.py, a cam
 in test_camera_features_node.py."""
 import threading
 import time
+from concurrent.futures import ThreadPoolExecutor
 
 import pytest
 
 from mvpose_nodes.fitting.sync import FrameRequests, PendingSets, SyncedSet, ready_to_request
-from mvpose_nodes.ros.diagnostics import StageClock, thread_cpu_seconds
+from mvpose_nodes.ros.diagnostics import StageClock, pool_cpu_seconds, thread_cpu_seconds
 
 pytestmark = pytest.mark.pure
 
@@ -72,6 +73,27 @@ def test_stage_clock_counts_the_calling_threads_cpu_not_its_sleep():
     assert seconds['spin'] >= 0.05 and seconds['sleep'] < 0.01
     assert clock.snapshot()['spin'][1] == 1
     assert thread_cpu_seconds(threading.current_thread()) >= 0.05
+
+
+def test_a_thread_pools_cpu_is_the_sum_of_its_threads():
+    """pool_cpu_seconds adds up the CPU of a ThreadPoolExecutor's threads (named by its thread_name_prefix),
+    not that of other threads whose name only begins alike."""
+    def spin(seconds):
+        deadline = time.thread_time() + seconds
+        while time.thread_time() < deadline:
+            pass
+        return threading.current_thread().name, time.thread_time()
+    assert pool_cpu_seconds('spinners') == 0.0
+    with ThreadPoolExecutor(2, thread_name_prefix='spinners') as pool:
+        clocks = {}   # each pool thread's CPU clock at the end of its last task
+        for name, seconds in pool.map(spin, [0.05, 0.05]):
+            clocks[name] = max(seconds, clocks.get(name, 0.0))
+        spent = sum(clocks.values())
+        assert spent >= 0.1
+        others = threading.Thread(target=spin, args=(0.05,), name='spinnersX')
+        others.start()
+        assert pool_cpu_seconds('spinners') == pytest.approx(spent, abs=0.01)
+        others.join()
 
 
 def announced(stamp_ms, cameras=(3, 5, 7)):

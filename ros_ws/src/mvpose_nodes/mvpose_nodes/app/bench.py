@@ -27,8 +27,9 @@ end-to-end throughput = frame sets fitted / (last skeleton received - first imag
 decode-only throughput = 1 / (cameras x median decode time of one image): frame sets per second that one
 core decoding the bag's images could deliver, and nothing else. CPU seconds and CPU % of each node are
 over the run (from /proc/PID/stat), peak RSS over the node's whole life (VmHWM). Where each node's CPU
-goes, stage by stage, comes from the nodes' own /diagnostics (ros/diagnostics.py) at the start and the
-end of the run. In open loop, the fitted frame sets' mean joint error against the bag's
+goes, stage by stage (and the skeleton_fitter's hypotheses pool, which does part of its fit, apart from
+DDS's threads), comes from the nodes' own /diagnostics (ros/diagnostics.py) at the start and the end of
+the run. In open loop, the fitted frame sets' mean joint error against the bag's
 /mvpose/ground_truth.
 
 `./mvpose soak [BAG] [--frame-sets N]`: the same closed loop for N frame sets, the bag's frame sets sent

@@ -41,8 +41,8 @@ from mvpose_nodes.body.camera import intrinsics, look_at
 from mvpose_nodes.body.kinematics import BONES, bone_lengths, forward_kinematics, inverse_kinematics
 from mvpose_nodes.body.model import JOINT_INDEX, LABEL_TORSO, PARAMETER_INDEX, STAGE_NAMES
 from mvpose_nodes.fitting.compiled import MAP_LABELS, nearest_capsules, pack_frame
-from mvpose_nodes.fitting.hypotheses import (PERIODIC_PROBE, RELABELLINGS, START_LABELLINGS, Track, face_away,
-                                             feet_outside, relabelled_joints, relabelled_stages)
+from mvpose_nodes.fitting.hypotheses import (HYPOTHESES_POOL, PERIODIC_PROBE, RELABELLINGS, START_LABELLINGS, Track,
+                                             face_away, feet_outside, relabelled_joints, relabelled_stages)
 from mvpose_nodes.fitting.initialisation import (
     completed_joints, consistent_evidence, facing_right, labelled_joints, person_lengths, stature, tallest_measurements,
     triangulated_joints, upright)
@@ -106,7 +106,7 @@ class SkeletonFitter:
         # search, which releases the GIL: with threads > 1 they run side by side (the same results); so do a
         # stage's searches from its several starts while one hypothesis is fitted (search_stages).
         self.local = threading.local()   # .worker: this thread is one of the pool's
-        self.pool = ThreadPoolExecutor(threads, thread_name_prefix='hypotheses',
+        self.pool = ThreadPoolExecutor(threads, thread_name_prefix=HYPOTHESES_POOL,
                                        initializer=lambda: setattr(self.local, 'worker', True)) if threads > 1 else None
         self.lengths = None if lengths is None else dict(lengths)
         # The person's measurements on upright frame sets (measure), while the lengths are not given.

@@ -32,6 +32,7 @@ from mvpose_nodes.body.model import JOINT_INDEX, STAGE_NAMES, torso_frame
 from mvpose_nodes.fitting.limb_sides import LimbTracks, exchange, exchanged_pairs
 from mvpose_nodes.fitting.objective import outside_distances
 
+HYPOTHESES_POOL = 'hypotheses'   # the name of the threads that fit hypotheses side by side (SkeletonFitter.pool)
 # A point of each foot, ahead of the ankle where the hips face and below it, which a labelling turned round
 # puts behind the heel, off the shoe: FOOT_REACH of the stature ahead (15 cm at 1.75 m, the ball of the
 # foot: a foot is about 15 % of the stature long, the ankle over its back third).

@@ -32,6 +32,7 @@ from std_msgs.msg import Header
 from visualization_msgs.msg import MarkerArray
 
 from mvpose_nodes.fitting.fitter import warm_up
+from mvpose_nodes.fitting.hypotheses import HYPOTHESES_POOL
 from mvpose_nodes.fitting.sync import FrameRequests, PendingSets, ready_to_request
 from mvpose_nodes.ros.conversions import joint_state, joints_from_skeleton, skeleton_markers, stamp_ns
 from mvpose_nodes.ros.diagnostics import NodeDiagnostics
@@ -78,7 +79,7 @@ class SkeletonFitterNode(MultiCameraNode):
         self.working = {'preparing': False, 'fitting': False}   # each stage busy with a set (request_overlap)
         self.workers = {name: threading.Thread(target=work, name=name, daemon=True)
                         for name, work in (('preparing', self.preparing_loop), ('fitting', self.fitting_loop))}
-        self.diagnostics = NodeDiagnostics(self, self.state, [self.clock], self.workers)
+        self.diagnostics = NodeDiagnostics(self, self.state, [self.clock], self.workers, pools=[HYPOTHESES_POOL])
         for worker in self.workers.values():
             worker.start()
         self.get_logger().info(f'fitting cameras {self.cameras}')

@@ -9,12 +9,15 @@ message, any publisher of another message type on a topic the node subscribes: f
   cpu/process                   every thread of the process (time.process_time)
   cpu/thread/<name>             one thread (e.g. 'executor': rclpy's callbacks, taking and deserialising
                                 messages; 'preparing' and 'fitting': the fitter's two workers)
+  cpu/pool/<name>               the running threads of a thread pool together (concurrent.futures names
+                                them <name>_0, <name>_1, ...; e.g. the fitter's 'hypotheses', which fit the
+                                labellings and a stage's searches beside the 'fitting' thread)
   cpu/stage/<stage>, calls/<stage>   the StageClock stages (each within one of the threads)
   publishers matched/<topic>    publishers matched by the node's subscription of <topic>, and
   subscribers matched/<topic>   subscriptions matched by its publisher of <topic> (MatchedEndpoints: how a
                                 launcher or a test knows the graph is connected, not only discovered)
 What no stage covers in a thread is rclpy's own work there (take, deserialise, executor); what no
-thread covers in the process is DDS's threads (transport, discovery) and the interpreter's.
+thread or pool covers in the process is DDS's threads (transport, discovery) and the interpreter's.
 """
 import fcntl
 import socket
@@ -84,13 +87,22 @@ def thread_cpu_seconds(thread):
         return None
 
 
-def status_values(clocks, threads, counters):
-    """The DiagnosticStatus values [KeyValue] of StageClocks, {name: threading.Thread} and {key: value}."""
+def pool_cpu_seconds(name):
+    """CPU seconds of the running threads of the thread pool `name` (ThreadPoolExecutor's
+    thread_name_prefix: its threads are named <name>_<i>) together; 0 before it has started one."""
+    pool = [thread for thread in threading.enumerate() if thread.name.startswith(f'{name}_')]
+    return sum(seconds for seconds in map(thread_cpu_seconds, pool) if seconds is not None)
+
+
+def status_values(clocks, threads, counters, pools=()):
+    """The DiagnosticStatus values [KeyValue] of StageClocks, {name: threading.Thread}, {key: value} and
+    the names of thread pools (pool_cpu_seconds)."""
     values = [KeyValue(key='cpu/process', value=f'{time.process_time():.6f}')]
     for name, thread in threads.items():
         seconds = thread_cpu_seconds(thread)
         if seconds is not None:
             values.append(KeyValue(key=f'cpu/thread/{name}', value=f'{seconds:.6f}'))
+    values += [KeyValue(key=f'cpu/pool/{name}', value=f'{pool_cpu_seconds(name):.6f}') for name in pools]
     for clock in clocks:
         for stage, (seconds, calls) in clock.snapshot().items():
             values += [KeyValue(key=f'cpu/stage/{stage}', value=f'{seconds:.6f}'),
@@ -100,7 +112,8 @@ def status_values(clocks, threads, counters):
 
 
 def stage_cpu(status):
-    """Parse a DiagnosticStatus of NodeDiagnostics: ({'process': s, 'thread/<name>': s, 'stage/<stage>': s},
+    """Parse a DiagnosticStatus of NodeDiagnostics: ({'process': s, 'thread/<name>': s, 'pool/<name>': s,
+    'stage/<stage>': s},
     {stage: calls}, {other key: value})."""
     cpu, calls, other = {}, {}, {}
     for item in status.values:
@@ -116,10 +129,11 @@ def stage_cpu(status):
 class NodeDiagnostics:
     """Publishes `node`'s DiagnosticStatus on /diagnostics every DIAGNOSTICS_PERIOD. state() -> (level
     'ok' | 'warn' | 'error', message, {key: value}); clocks: StageClocks; threads: {name: Thread} (the
-    executor's, the thread that creates this, is added as 'executor')."""
+    executor's, the thread that creates this, is added as 'executor'); pools: names of the node's thread
+    pools (pool_cpu_seconds)."""
 
-    def __init__(self, node, state, clocks=(), threads=None):
-        self.node, self.state, self.clocks = node, state, list(clocks)
+    def __init__(self, node, state, clocks=(), threads=None, pools=()):
+        self.node, self.state, self.clocks, self.pools = node, state, list(clocks), tuple(pools)
         self.threads = {'executor': threading.current_thread(), **(threads or {})}
         self.publisher = node.create_publisher(DiagnosticArray, DIAGNOSTICS_TOPIC, 10)
         self.hardware_id = host_identity()
@@ -143,7 +157,7 @@ class NodeDiagnostics:
                              value=str(publisher.get_subscription_count())) for publisher in self.node.publishers]
         status = DiagnosticStatus(level=LEVELS[level], name=self.node.get_fully_qualified_name(), message=message,
                                   hardware_id=self.hardware_id,
-                                  values=status_values(self.clocks, self.threads, counters) + matched)
+                                  values=status_values(self.clocks, self.threads, counters, self.pools) + matched)
         array = DiagnosticArray(status=[status])
         array.header.stamp = self.node.get_clock().now().to_msg()
         self.publisher.publish(array)

@@ -104,16 +104,19 @@ def node_usage(before, after, wall_seconds, ticks_per_second):
 
 def cpu_split(before, after):
     """Where a node's CPU went between two of its /diagnostics statuses, each as ros.diagnostics.stage_cpu
-    gives its CPU: {'process': s, 'thread/<name>': s, 'stage/<stage>': s}. Returns {label: CPU s}: each
-    stage; 'rclpy (take, deserialise, executor)': what no stage covers in the node's threads; 'DDS and
-    other threads': what no thread covers in the process; 'total': the process."""
+    gives its CPU: {'process': s, 'thread/<name>': s, 'pool/<name>': s, 'stage/<stage>': s}. Returns
+    {label: CPU s}: each stage; 'rclpy (take, deserialise, executor)': what no stage covers in the node's
+    threads; '<name> pool': each thread pool's threads (the skeleton_fitter's 'hypotheses' pool does part
+    of its fit); 'DDS and other threads': what no thread or pool covers in the process; 'total': the
+    process."""
     def delta(key):
         return after.get(key, 0.0) - before.get(key, 0.0)
     stages = {key[6:]: delta(key) for key in after if key.startswith('stage/')}
     threads = sum(delta(key) for key in after if key.startswith('thread/'))
+    pools = {f'{key[5:]} pool': delta(key) for key in after if key.startswith('pool/')}
     process = delta('process')
-    return {**stages, 'rclpy (take, deserialise, executor)': threads - sum(stages.values()),
-            'DDS and other threads': process - threads, 'total': process}
+    return {**stages, 'rclpy (take, deserialise, executor)': threads - sum(stages.values()), **pools,
+            'DDS and other threads': process - threads - sum(pools.values()), 'total': process}
 
 
 def backlog_growth(sent, skeletons):
