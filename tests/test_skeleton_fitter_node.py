@@ -14,6 +14,7 @@ from mvpose_msgs.msg import LabelledContour, Skeleton, SkinEllipseArray
 from sensor_msgs.msg import Image
 
 from mvpose_nodes.body.camera import studio_rig
+from mvpose_nodes.fitting.hypotheses import HYPOTHESES_POOL
 from mvpose_nodes.ros.camera_bag import frame_stamp_ns
 from mvpose_nodes.ros.conversions import (calibration_messages, empty_feature_messages, feature_messages,
                                           joints_from_skeleton, optical_frame, set_stamp, stamp_ns)
@@ -224,6 +225,11 @@ def test_frame_sets_faster_than_the_fitter_skip_the_stale_ones(rendered_features
         spin_until(node, lambda: any(v.key == 'frame sets skipped (stale)' and v.value == str(skipped)
                                      for array in diagnostics for status in array.status for v in status.values),
                    10, f'/diagnostics counting {skipped} skipped frame sets')
+        # The start fitted its labellings on the hypotheses pool (fit_threads 2): its CPU is reported apart.
+        pool = f'cpu/pool/{HYPOTHESES_POOL}'
+        spin_until(node, lambda: any(v.key == pool and float(v.value) > 0
+                                     for array in diagnostics for status in array.status for v in status.values),
+                   10, f'/diagnostics reporting {pool}')
     finally:
         node.destroy_node()
     fitted = [stamp_ns(m.header) for m in burst]
