@@ -6,6 +6,7 @@ true masks: what is tested is the choice between labellings, not the features (t
 test_commands.py)."""
 import functools
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -182,6 +183,41 @@ def test_the_periodic_probe_rights_a_fit_turned_round(walk, monkeypatch, probed)
         assert not any(swapped[WITHIN:]), swapped
     else:
         assert all(swapped[WITHIN:]), swapped
+
+
+def stride_probes(frames, settings, monkeypatch):
+    """Fit `frames` from the true start (no start hypotheses) and return, at each frame set, the fit's ankles'
+    distance [m] and whether the legs exchanged were probed there, and the person's leg length [m]."""
+    monkeypatch.setattr(fitter_module, 'START_LABELLINGS', ())
+    probed = []
+    probe = SkeletonFitter.probe
+    monkeypatch.setattr(SkeletonFitter, 'probe', lambda self, *args: probed.append(args[-1]) or probe(self, *args))
+    fitter, trail = SkeletonFitter(settings), []
+    ankles = [JOINT_NAMES.index('left_ankle'), JOINT_NAMES.index('right_ankle')]
+    for index, (_, views) in enumerate(frames):
+        probed.clear()
+        fit = fitter.fit(index / 25.0, views)
+        trail.append((float(np.linalg.norm(np.subtract(*fit.joints[ankles]))), 'legs exchanged' in probed))
+    return trail, fitter.lengths['thigh'] + fitter.lengths['shin']
+
+
+def test_the_legs_exchanged_are_probed_as_they_pass_and_once_well_apart(walk, monkeypatch):
+    """A stride's legs exchanged are followed as the fit's ankles come within crossing_distance (where both
+    labellings are nearly one pose, so neither is pruned on one frame set) and again once the ankles are
+    stride_apart of the leg apart (where they differ more), not as soon as they part (stride_apart 0: the
+    second probe earlier); a stride that closes before (stride_apart out of reach) is probed at its widest."""
+    settings = FitterSettings(probe_period=100000)
+    trail, leg = stride_probes(walk, settings, monkeypatch)
+    crossing = next(i for i, (apart, _) in enumerate(trail) if apart < settings.crossing_distance)
+    far = next(i for i, (apart, _) in enumerate(trail) if i > crossing and apart >= settings.stride_apart * leg)
+    assert [i for i, (_, probed) in enumerate(trail) if probed][:2] == [crossing, far], (trail, leg)
+    early, _ = stride_probes(walk, replace(settings, stride_apart=0.0), monkeypatch)
+    second = [i for i, (_, probed) in enumerate(early) if probed][1]
+    assert early[second][0] < settings.stride_apart * leg, early
+    short, _ = stride_probes(walk, replace(settings, stride_apart=10.0), monkeypatch)
+    second = [i for i, (_, probed) in enumerate(short) if probed][1]
+    stride = [apart for apart, _ in short[crossing:second]]
+    assert short[second - 1][0] == max(stride) > short[second][0], short
 
 
 def test_the_face_the_views_see_weighs_on_front_and_back(standing, monkeypatch):

@@ -1,4 +1,4 @@
-"""A fit that has lost the person says so and starts again (issue 13): fitter.unexplained_share, Fit.lost
+"""A fit that has lost the person says so and starts again (issue 13): hypotheses.unexplained_share, Fit.lost
 and the re-initialisation that follows; and one camera whose keypoints are far off is not followed
 (initialisation.consistent_views). On rendered silhouettes of the CMU walk with exact keypoints."""
 import math
@@ -9,7 +9,8 @@ import pytest
 
 from mvpose_nodes.body.camera import studio_rig
 from mvpose_nodes.body.model import JOINT_NAMES
-from mvpose_nodes.fitting.fitter import TORSO_POSITION, SkeletonFitter, unexplained_share
+from mvpose_nodes.fitting.fitter import TORSO_POSITION, SkeletonFitter
+from mvpose_nodes.fitting.hypotheses import unexplained_share
 from mvpose_nodes.fitting.initialisation import consistent_views, triangulated_joints
 from mvpose_nodes.fitting.settings import FitterSettings
 

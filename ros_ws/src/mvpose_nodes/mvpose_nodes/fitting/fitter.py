@@ -40,9 +40,10 @@ import numpy as np
 from mvpose_nodes.body.camera import intrinsics, look_at
 from mvpose_nodes.body.kinematics import BONES, bone_lengths, forward_kinematics, inverse_kinematics
 from mvpose_nodes.body.model import JOINT_INDEX, LABEL_TORSO, PARAMETER_INDEX, STAGE_NAMES
-from mvpose_nodes.fitting.compiled import MAP_LABELS, nearest_capsules, pack_frame
+from mvpose_nodes.fitting.compiled import MAP_LABELS, pack_frame
 from mvpose_nodes.fitting.hypotheses import (HYPOTHESES_POOL, PERIODIC_PROBE, RELABELLINGS, START_LABELLINGS, Track,
-                                             face_away, feet_outside, relabelled_joints, relabelled_stages)
+                                             face_away, feet_outside, relabelled_joints, relabelled_stages,
+                                             unexplained_share)
 from mvpose_nodes.fitting.initialisation import (
     completed_joints, consistent_evidence, facing_right, labelled_joints, person_lengths, stature, tallest_measurements,
     triangulated_joints, upright)
@@ -50,7 +51,7 @@ from mvpose_nodes.fitting.limb_sides import LimbTracks, exchanged_pairs, oriente
 from mvpose_nodes.fitting.limb_starts import limb_start_joints
 from mvpose_nodes.fitting.objective import EDGE_PX, MapArena, boundary_distances, map_floats, outline_of
 from mvpose_nodes.fitting.settings import FitterSettings
-from mvpose_nodes.fitting.stage_search import CAPSULE_ENDS, StageSearch, stage_indices
+from mvpose_nodes.fitting.stage_search import StageSearch, stage_indices
 from mvpose_nodes.vision.contour import SIDE_A, SIDE_B, ContourLabels
 
 TORSO_POSITION = stage_indices('torso')[:3]   # torso_x, torso_y, torso_z: the root's position [m]
@@ -62,7 +63,6 @@ TORSO_YAW = PARAMETER_INDEX['torso_rz']   # the body's turn about the vertical [
 # the way they go (in 20 of the suite's 46 tuning cases of seeds 1-4), and one search does not turn the
 # torso that far (search_stages).
 TORSO_START_YAWS = tuple(np.pi * eighth / 4 for eighth in (-2, -1, 1, 2))
-LOST_MARGIN = 0.25  # [m] an outline point this far from every bone is not explained by the skeleton
 # Keypoints read off the silhouette's shape (vision/silhouette.py): wrong once the image cuts the person off,
 # so left out then; but the root (the silhouette's centroid), shifted as it is, is kept at CUT_ROOT_CONFIDENCE
 # of its confidence: without it, a person cut off in every view (close to the cameras) has no start at all.
@@ -124,6 +124,7 @@ class SkeletonFitter:
         self.start_labels = None  # the start's triangulated joints, labelled (initial_parameters)
         self.face_right = None    # this frame set's person's right as the face says (initialisation.facing_right)
         self.legs_passed = False  # the fit's ankles have passed each other since the last probe of the legs
+        self.last_apart = 0.0     # [m] how far apart the fit's ankles were in the last frame set followed
         self.last_found = None    # the last frame set's triangulated joints {name: (3,) [m]} (or None)
 
     @property
@@ -164,15 +165,21 @@ class SkeletonFitter:
                     track.cost += self.cost_of(track.parameters, views)
             self.each(follow, [self.track] + self.rivals)
             ankles = self.track.joints[[JOINT_INDEX['left_ankle'], JOINT_INDEX['right_ankle']]]
-            apart = np.linalg.norm(ankles[0] - ankles[1]) >= settings.crossing_distance
-            self.legs_passed |= not apart
+            apart = np.linalg.norm(ankles[0] - ankles[1])
+            self.legs_passed |= apart < settings.crossing_distance
             if not self.rivals:
                 self.since_probe += 1
-                if self.legs_passed and apart:   # a stride: where continuity is least sure of the legs
+                # A stride, where continuity is least sure of the legs: probed as they close in again from
+                # crossing_distance or more (as they pass, or a short stride's widest) and once well apart.
+                leg = self.lengths['thigh'] + self.lengths['shin']
+                widest = settings.crossing_distance <= self.last_apart > apart
+                far = apart >= max(settings.crossing_distance, settings.stride_apart * leg)
+                if self.legs_passed and (far or widest):
                     self.legs_passed = False
                     self.probe(stamp, views, found, 'legs exchanged')
                 elif self.since_probe >= settings.probe_period:
                     self.probe(stamp, views, found)
+            self.last_apart = apart
         # While a start's hypotheses are compared, the one that explains the views best so far is given out.
         track = min([self.track] + self.rivals, key=lambda t: t.cost) if self.starting else self.track
         self.given = track
@@ -433,25 +440,6 @@ def pelvis_displacement(before, after):
     if before is None or after is None or 'pelvis' not in before or 'pelvis' not in after:
         return None
     return after['pelvis'] - before['pelvis']
-
-
-def unexplained_share(views, joints):
-    """The share of the silhouettes' outline that the skeleton joints (15, 3) [m] does not explain: per view
-    with an outline, its points further than LOST_MARGIN (in metres at the pelvis's depth) from every
-    projected bone; the median over the views. 0 without outlines. Measured on the suite's tuning cases:
-    0-4 % for fits that follow the person (also with arms overhead, where the head and neck keypoints are
-    0.3-0.6 m off and cannot tell), 30-70 % for runs fitted 0.5-1.7 m off; a mirrored fit explains the
-    outline as well as the right one (0-9 %), so this cannot see that (hypotheses.py does)."""
-    shares = []
-    for view in views:
-        if view.outline is None or not len(view.outline.points):
-            continue
-        pixels, depths = view.camera.project(joints)
-        _, residuals = nearest_capsules(view.outline.points, pixels[CAPSULE_ENDS[:, 0]], pixels[CAPSULE_ENDS[:, 1]],
-                                        np.zeros(len(CAPSULE_ENDS)), np.zeros(len(CAPSULE_ENDS), np.bool_))
-        metres = residuals * depths[JOINT_INDEX['pelvis']] / view.camera.K[0, 0]
-        shares.append(float(np.mean(metres > LOST_MARGIN)))
-    return float(np.median(shares)) if shares else 0.0
 
 
 def view_from_features(camera, keypoints, contour, frontness=None, skin=None, arena=None):

@@ -49,7 +49,7 @@ class FitterSettings:
              'skipped in it to keep up (the fit then follows on)', 0.01, 3600.0)
     lost_share: float = setting(
         0.3, "a fit that leaves more than this share of the outline unexplained (median over the views; "
-             "fitter.unexplained_share) has left the person", 0.0, 1.0)
+             "hypotheses.unexplained_share) has left the person", 0.0, 1.0)
     lost_frames: int = setting(2, 'after this many such fits in a row the fit is lost: said so '
                                   '(STATUS_LOST) and re-initialised on the next frame set', 1, 1000)
     ankle_height: float = setting(0.039, "the ankle's height, as a share of the stature (the template's)", 0.0, 0.2)
@@ -97,8 +97,14 @@ class FitterSettings:
         0.1, "a hypothesis whose fits so far cost this share more than the cheapest's is dropped before its window "
              'ends (a large value: every hypothesis followed to the end)', 0.0, 1e6)
     crossing_distance: float = setting(
-        0.25, "[m] the fit's ankles nearer than this have passed each other (a stride, where continuity is least "
-              'sure which leg is which): once they part, the legs exchanged are followed beside the fit', 0.0, 2.0)
+        0.25, "[m] the fit's ankles nearer than this are passing each other (a stride, where continuity is least "
+              'sure which leg is which): the legs exchanged are followed beside the fit as they close in from this '
+              'far or more (as they pass, or at a short stride\'s widest) and once they are stride_apart apart',
+        0.0, 2.0)
+    stride_apart: float = setting(
+        0.5, "[share of the leg: thigh + shin] a stride's legs exchanged are followed again once the fit's ankles "
+             'are this far apart (and at least crossing_distance), where the two labellings differ more than as '
+             'soon as they part (docs/method.md, session 41)', 0.0, 10.0)
     face_cost_share: float = setting(
         0.2, "a labelling whose hips face straight away from the face the views see (initialisation.facing_right) has "
              "its fit's cost raised by this share when labellings are compared, one side on to it not at all "
