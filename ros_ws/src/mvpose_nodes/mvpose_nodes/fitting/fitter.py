@@ -172,9 +172,9 @@ class SkeletonFitter:
                 # A stride, where continuity is least sure of the legs: probed as they close in again from
                 # crossing_distance or more (as they pass, or a short stride's widest) and once well apart.
                 leg = self.lengths['thigh'] + self.lengths['shin']
-                widest = settings.crossing_distance <= self.last_apart > apart
+                closing = settings.crossing_distance <= self.last_apart > apart
                 far = apart >= max(settings.crossing_distance, settings.stride_apart * leg)
-                if self.legs_passed and (far or widest):
+                if self.legs_passed and (far or closing):
                     self.legs_passed = False
                     self.probe(stamp, views, found, 'legs exchanged')
                 elif self.since_probe >= settings.probe_period:
