@@ -425,13 +425,20 @@ def nearest_capsules(points, starts, ends, radii, terminal):
     ends before the point)."""
     count = points.shape[0]
     nearest, residual = np.zeros(count, np.int64), np.full(count, np.inf)
-    xs, ys, distances = points[:, 0].copy(), points[:, 1].copy(), np.empty(count)   # contiguous
+    _nearest_into(points[:, 0].copy(), points[:, 1].copy(), starts, ends, radii, terminal, nearest, residual,
+                  np.empty(count))   # x and y contiguous
+    return nearest, residual
+
+
+@njit(cache=True, nogil=True, error_model='numpy')
+def _nearest_into(xs, ys, starts, ends, radii, terminal, nearest, residual, distances):
+    """nearest_capsules of the points (xs, ys) (M,) into nearest and residual (M,) (set beforehand to 0 and
+    inf), with `distances` (M,) for one capsule's residuals."""
     for k in range(starts.shape[0]):
         _capsule_residuals(xs, ys, starts[k], ends[k], radii[k], terminal[k], distances)
-        for p in range(count):
+        for p in range(len(xs)):
             if distances[p] < residual[p]:
                 nearest[p], residual[p] = k, distances[p]
-    return nearest, residual
 
 
 @njit(cache=True, nogil=True, error_model='numpy')
@@ -444,21 +451,14 @@ def outline_nearest(parameters, bone_lengths, capsule_radius, capsule_terminal, 
     int64, within (P,) bool). The pose: parameters (29,), bone_lengths (14,) [m]."""
     joints = forward_joints(parameters, bone_lengths)
     count = len(outline_x)
-    nearest, within = np.zeros(count, np.int64), np.zeros(count, np.bool_)
-    residual, distances = np.full(count, np.inf), np.empty(count)
+    nearest, residual = np.zeros(count, np.int64), np.full(count, np.inf)
     for v in range(K.shape[0]):
         first, last = outline_range[v, 0], outline_range[v, 1]
         if last <= first:
             continue
         pixels, depth = _project_camera(K[v], R[v], t[v], D[v], joints)
-        for k in range(len(capsule_radius)):
-            a, b = CHAIN_START[k], CHAIN_END[k]
-            radius = capsule_radius[k] * K[v, 0, 0] / max(0.5 * (depth[a] + depth[b]), 0.1)
-            _capsule_residuals(outline_x[first:last], outline_y[first:last], pixels[a], pixels[b], radius,
-                               capsule_terminal[k], distances[first:last])
-            for p in range(first, last):
-                if distances[p] < residual[p]:
-                    nearest[p], residual[p] = k, distances[p]
-        for p in range(first, last):
-            within[p] = abs(residual[p]) < gate
-    return nearest, within
+        mean_depth = np.maximum(0.5 * (depth[CHAIN_START] + depth[CHAIN_END]), 0.1)
+        _nearest_into(outline_x[first:last], outline_y[first:last], pixels[CHAIN_START], pixels[CHAIN_END],
+                      capsule_radius * K[v, 0, 0] / mean_depth, capsule_terminal, nearest[first:last],
+                      residual[first:last], np.empty(last - first))
+    return nearest, np.abs(residual) < gate

@@ -24,7 +24,7 @@ exchanged keep the fit's torso, head and other limbs, the body turned round sear
 cost is its fits' objective with the outline assigned from the fitted pose (SkeletonFitter.cost_of), not
 the searches' own costs, whose assignments were made from where each search started. A fit that leaves
 much of the outline unexplained (unexplained_share) has lost the person, and the fitter starts again.
-Pure NumPy.
+No ROS: NumPy and the compiled nearest capsules.
 """
 import itertools
 from dataclasses import dataclass, field

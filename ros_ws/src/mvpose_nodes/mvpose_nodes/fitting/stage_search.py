@@ -100,7 +100,7 @@ CAPSULE_RADIUS = np.array([CAPSULE_RADII[bone.name.replace('left_', '').replace(
 CAPSULE_TERMINAL = np.array([bone.name.endswith(TERMINAL_BONES) for bone in BONES])
 FRACTIONS, SAMPLES = fractions_arrays()
 WITHOUT_PRIORS = np.array([1.0] * 8 + [0.0, 0.0])   # StagePack.weights' factors: smoothness and limits off
-WITHOUT_SMOOTHNESS = np.array([1.0] * 8 + [0.0, 1.0])   # and smoothness off, limits on
+WITHOUT_SMOOTHNESS = np.array([1.0] * 8 + [0.0, 1.0])   # the same factors: smoothness off, limits on
 STAGE_CAPSULE_INDEX = {stage: np.array([BONE_INDEX[name] for name in names]) for stage, names in STAGE_CAPSULES.items()}
 STAGE_CAPSULE_MASK = {stage: np.isin(np.arange(len(BONES)), index) for stage, index in STAGE_CAPSULE_INDEX.items()}
 
