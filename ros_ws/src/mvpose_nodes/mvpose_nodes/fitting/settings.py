@@ -109,6 +109,15 @@ class FitterSettings:
         0.2, "a labelling whose hips face straight away from the face the views see (initialisation.facing_right) has "
              "its fit's cost raised by this share when labellings are compared, one side on to it not at all "
              "(hypotheses.face_away; 0: the face is not asked)", 0.0, 100.0)
+    crossed_cost_share: float = setting(
+        0.2, 'a labelling whose fit has the knees crossed (hypotheses.knees_crossed) by crossed_knees or more has its '
+             'cost raised by this share when labellings are compared, less crossed by as much less, while the feet '
+             'are together (hypotheses.crossing_judged; 0: the knees are not asked)', 0.0, 100.0)
+    crossed_knees: float = setting(
+        0.05, "[m] the knees' crossing at which crossed_cost_share applies in full", 1e-3, 1.0)
+    standing_speed: float = setting(
+        0.5, "[m/s] the knees' crossing is judged while the fit's pelvis moves slower than this over "
+             'walking_baseline (standing, turning on the spot, sitting; a stride is judged by its probes)', 0.0, 100.0)
     foot_weight: float = setting(
         1.0, 'per px² of a point of a foot, ahead of the ankle where the hips face, outside the silhouette, added to '
              "a labelling's cost when labellings are compared (hypotheses.feet_outside; 0: the feet are not asked)",
