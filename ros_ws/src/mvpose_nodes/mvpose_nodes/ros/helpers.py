@@ -111,16 +111,31 @@ def watch_stop(context, name):
         while context.ok():
             time.sleep(SPIN_PERIOD)
         time.sleep(STOP_LIMIT)
-        abandon_stop(name)
+        abandon(name, 'it was asked to stop')
     threading.Thread(target=watch, name='stop watchdog', daemon=True).start()
 
 
-def abandon_stop(name):
-    """A node that hangs after it was asked to stop (watch_stop): say it and end the process, which frees what
-    it held."""
-    print(f'[WARN] {name}: still running {STOP_LIMIT:g} s after it was asked to stop (hung in rclpy); '
-          'exiting without cleaning up', file=sys.stderr, flush=True)
-    os._exit(0)
+def destroy_or_exit(node, name, code):
+    """node.destroy_node() for a command-line tool whose work is done, which then returns `code`; if rclpy hangs
+    in it (STOP_LIMIT: a `topic echo --count 5` printed its five messages and hung so in a full test run, session
+    42), the process says so STOP_LIMIT seconds later and ends with `code` all the same."""
+    done = threading.Event()
+
+    def watch():
+        if not done.wait(STOP_LIMIT):
+            abandon(name, 'its work was done', code)
+    threading.Thread(target=watch, name='teardown watchdog', daemon=True).start()
+    node.destroy_node()
+    done.set()
+    return code
+
+
+def abandon(name, after, code=0):
+    """A process hung in rclpy `after` something (watch_stop, destroy_or_exit): say it and end the process with
+    `code`, which frees what it held."""
+    print(f'[WARN] {name}: still running {STOP_LIMIT:g} s after {after} (hung in rclpy); exiting without cleaning up',
+          file=sys.stderr, flush=True)
+    os._exit(code)
 
 
 class StopSignal:

@@ -78,7 +78,7 @@ def report(args):
     import rclpy
     from diagnostic_msgs.msg import DiagnosticArray
     from mvpose_nodes.ros.diagnostics import DIAGNOSTICS_TOPIC, host_addresses
-    from mvpose_nodes.ros.helpers import StopSignal
+    from mvpose_nodes.ros.helpers import StopSignal, destroy_or_exit
     with StopSignal() as stop:
         node = rclpy.create_node('mvpose_doctor')
         hardware = {}   # fully qualified node name -> its DiagnosticStatus.hardware_id
@@ -113,8 +113,7 @@ def report(args):
             measured = (f'{len(sizes[topic]) / args.bandwidth_time:6.1f} Hz '
                         f'{human_bytes(sum(sizes[topic]) / args.bandwidth_time):>9s}/s' if args.bandwidth_time else '')
             print(f'  {topic:36s} {type_name:38s} {where:34s} {measured}')
-        node.destroy_node()
-    return 130 if stop.stopped else 0
+        return destroy_or_exit(node, 'doctor', 130 if stop.stopped else 0)
 
 
 def graph_of_others(node):

@@ -112,7 +112,7 @@ def echo(args):
         message_class(args.type)
     import rclpy
     from mvpose_nodes.io.msgdict import FieldError
-    from mvpose_nodes.ros.helpers import StopSignal, subscription_qos_for, wait_for_publishers
+    from mvpose_nodes.ros.helpers import StopSignal, destroy_or_exit, subscription_qos_for, wait_for_publishers
 
     render = _formatter(args)
     limit = 1 if args.once else args.count
@@ -141,13 +141,12 @@ def echo(args):
                 print(f'topic echo: no message on {args.topic} within {args.timeout} s', file=sys.stderr)
                 return 1
             rclpy.spin_once(node, timeout_sec=0.1)
-        node.destroy_node()
-    return 0 if not stop.stopped else 130
+        return destroy_or_exit(node, 'topic echo', 0 if not stop.stopped else 130)
 
 
 def list_topics(args):
     import rclpy
-    from mvpose_nodes.ros.helpers import StopSignal
+    from mvpose_nodes.ros.helpers import StopSignal, destroy_or_exit
     with StopSignal() as stop:
         node = rclpy.create_node('mvpose_topic_list')
         deadline = time.monotonic() + args.spin_time
@@ -155,8 +154,7 @@ def list_topics(args):
             rclpy.spin_once(node, timeout_sec=0.05)
         for name, types in sorted(node.get_topic_names_and_types()):
             print(f"{name} [{', '.join(types)}]" if args.show_types else name)
-        node.destroy_node()
-    return 0
+        return destroy_or_exit(node, 'topic list', 0)
 
 
 def rate_statistics(stamps, window):
@@ -201,7 +199,7 @@ def measure(args, node_name, report, window):
     """Subscribe to args.topic (serialised messages) once it has a publisher and print report([(arrival
     time [s], size [bytes]), ...]) of the last `window` messages every second, until args.duration or Ctrl-C."""
     import rclpy
-    from mvpose_nodes.ros.helpers import StopSignal, subscription_qos_for, wait_for_publishers
+    from mvpose_nodes.ros.helpers import StopSignal, destroy_or_exit, subscription_qos_for, wait_for_publishers
     with StopSignal() as stop:
         node = rclpy.create_node(node_name)
         published_type = wait_for_publishers(node, args.topic, args.duration or math.inf, stop)
@@ -218,8 +216,7 @@ def measure(args, node_name, report, window):
                 next_report = time.monotonic()
                 print(report(received), flush=True)
                 del received[:-window]
-        node.destroy_node()
-    return 0
+        return destroy_or_exit(node, f'topic {args.verb}', 0)
 
 
 def pub(args):
@@ -246,7 +243,7 @@ def pub(args):
 
     import rclpy
     from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-    from mvpose_nodes.ros.helpers import StopSignal, wait_for_acknowledgements
+    from mvpose_nodes.ros.helpers import StopSignal, destroy_or_exit, wait_for_acknowledgements
     qos = QoSProfile(depth=args.qos_depth, reliability=ReliabilityPolicy.get_from_short_key(args.qos_reliability),
                      durability=DurabilityPolicy.get_from_short_key(args.qos_durability))
     with StopSignal() as stop:
@@ -262,8 +259,7 @@ def pub(args):
             if times is None or count < times:
                 stop.wait(1.0 / args.rate)
         wait_for_acknowledgements([publisher], timeout_sec=2.0)
-        node.destroy_node()
-    return 0
+        return destroy_or_exit(node, 'topic pub', 0)
 
 
 if __name__ == '__main__':
