@@ -220,26 +220,31 @@ def test_the_legs_exchanged_are_probed_as_they_pass_and_once_well_apart(walk, mo
     assert short[second - 1][0] == max(stride) > short[second][0], short
 
 
-def test_crossed_knees_standing_cost_more_and_probe_the_legs_exchanged(turn, walk, monkeypatch):
-    """Standing with the feet together (a turn on the spot), a pose whose knees cross costs crossed_cost_share
-    more in full when they cross by crossed_knees (the legs exchanged: hypotheses.knees_crossed), and a fit
-    whose knees cross has the legs exchanged probed at once; walking (the pelvis faster than standing_speed)
-    neither. (On the suite's features a turn kept its legs exchanged for 25 frame sets without this, session
-    42; with exact keypoints and true masks as here the searches undo it themselves, so the wiring is what is
-    tested: knees_crossed is told what to say for the probe.)"""
+@pytest.mark.parametrize('pair, labelling', [('knee', 'legs exchanged'), ('wrist', 'arms exchanged')])
+def test_crossed_knees_standing_and_crossed_wrists_cost_more_and_are_probed(turn, walk, monkeypatch, pair, labelling):
+    """A pose whose wrists cross (the arms exchanged), or whose knees cross (the legs exchanged) while the feet are
+    together and the person stands (a turn on the spot), costs crossed_cost_share more, in full when they cross by
+    crossed_by (hypotheses.pair_crossing); and a fit whose wrists or knees cross so has that pair exchanged probed
+    at once. Walking (the pelvis faster than standing_speed) the knees count for neither, the wrists for both.
+    (On the suite's features a turn kept its legs exchanged for 25 frame sets without this and a run its arms for
+    15, session 42; with exact keypoints and true masks as here the searches undo exchanged legs themselves, so
+    the wiring is what is tested: pair_crossing is told what to say for the probe.)"""
     from mvpose_nodes.body.kinematics import forward_kinematics, inverse_kinematics
-    from mvpose_nodes.fitting.hypotheses import knees_crossed
+    from mvpose_nodes.fitting.hypotheses import pair_crossing
     from mvpose_nodes.fitting.limb_sides import exchanged_pairs
+    base = {'knee': 'hip', 'wrist': 'shoulder'}[pair]
+    other = {'knee': ('wrist', 'shoulder'), 'wrist': ('knee', 'hip')}[pair]
     monkeypatch.setattr(fitter_module, 'START_LABELLINGS', ())
     share = FitterSettings().crossed_cost_share
-    for frames, judged in ((turn, True), (walk, False)):
+    for frames, standing in ((turn, True), (walk, False)):
+        judged = standing or pair == 'wrist'
         fitter = SkeletonFitter(FitterSettings(probe_period=100000, foot_weight=0.0))   # the feet's term is added
         for index in range(3):
             fitter.fit(index / 25.0, frames[index][1])
-        joints = fitter.track.joints
-        crossed = inverse_kinematics(exchanged_pairs(joints, RELABELLINGS['legs exchanged']))
-        crossing = knees_crossed(forward_kinematics(crossed, fitter.lengths)[0])
-        assert crossing >= fitter.settings.crossed_knees, crossing
+        crossed = inverse_kinematics(exchanged_pairs(fitter.track.joints, RELABELLINGS[labelling]))
+        crossed_joints = forward_kinematics(crossed, fitter.lengths)[0]
+        assert pair_crossing(crossed_joints, pair, base) >= fitter.settings.crossed_by
+        assert pair_crossing(crossed_joints, *other) == 0.0
         views = frames[3][1]
         costs = [fitter.cost_of(crossed, views)]
         fitter.settings = replace(fitter.settings, crossed_cost_share=0.0)
@@ -248,30 +253,31 @@ def test_crossed_knees_standing_cost_more_and_probe_the_legs_exchanged(turn, wal
         assert costs[0] == pytest.approx(costs[1] * (1 + share if judged else 1.0), rel=1e-12), costs
         probed = []
         monkeypatch.setattr(fitter, 'probe', lambda *args: probed.append(args[-1]))
-        monkeypatch.setattr(fitter_module, 'knees_crossed', lambda joints: 0.1)
+        monkeypatch.setattr(fitter_module, 'pair_crossing', lambda joints, limb, _: 0.1 if limb == pair else 0.0)
         fitter.fit(3 / 25.0, views)
         monkeypatch.undo()
         monkeypatch.setattr(fitter_module, 'START_LABELLINGS', ())
-        assert probed == (['legs exchanged'] if judged else []), probed
+        assert probed == ([labelling] if judged else []), probed
 
 
-def test_knees_cross_only_when_judged(turn, walk):
-    """knees_crossed: 0 for the true joints of the turn and of the walk, the knees' crossing [m] across the hips'
-    line with the knees exchanged. crossing_judged: only with the ankles within crossing_distance, the pelvis
+def test_pairs_cross_and_knees_are_judged_only_standing(turn, walk):
+    """pair_crossing: 0 for the true knees and wrists of the turn and of the walk, the crossing [m] across the hips'
+    (the shoulders') line with the knees (the wrists) exchanged. crossing_judged: only with the ankles within crossing_distance, the pelvis
     slower than standing_speed over the fits' history, and two fits in it."""
-    from mvpose_nodes.fitting.hypotheses import crossing_judged, knees_crossed
+    from mvpose_nodes.fitting.hypotheses import crossing_judged, pair_crossing
     from mvpose_nodes.fitting.limb_sides import LimbTracks
     settings = FitterSettings()
-    knees = [JOINT_NAMES.index('left_knee'), JOINT_NAMES.index('right_knee')]
-    hips = [JOINT_NAMES.index('left_hip'), JOINT_NAMES.index('right_hip')]
-    for truth, _ in turn + walk:
-        assert knees_crossed(truth.copy()) == 0.0
-        exchanged = truth.copy()
-        exchanged[knees] = exchanged[knees[::-1]]
-        left = truth[hips[0]] - truth[hips[1]]
-        left[2] = 0.0
-        across = np.dot(truth[knees[0]] - truth[knees[1]], left) / np.linalg.norm(left)
-        assert knees_crossed(exchanged) == pytest.approx(across, abs=1e-12)
+    for limb, base in (('knee', 'hip'), ('wrist', 'shoulder')):
+        ends = [JOINT_NAMES.index(f'left_{limb}'), JOINT_NAMES.index(f'right_{limb}')]
+        line = [JOINT_NAMES.index(f'left_{base}'), JOINT_NAMES.index(f'right_{base}')]
+        for truth, _ in turn + walk:
+            assert pair_crossing(truth.copy(), limb, base) == 0.0
+            exchanged = truth.copy()
+            exchanged[ends] = exchanged[ends[::-1]]
+            left = truth[line[0]] - truth[line[1]]
+            left[2] = 0.0
+            across = np.dot(truth[ends[0]] - truth[ends[1]], left) / np.linalg.norm(left)
+            assert pair_crossing(exchanged, limb, base) == pytest.approx(across, abs=1e-12)
     standing, striding = LimbTracks(settings), LimbTracks(settings)
     assert not crossing_judged(turn[0][0], standing, settings)
     for index in range(3):

@@ -42,8 +42,8 @@ from mvpose_nodes.body.kinematics import BONES, bone_lengths, forward_kinematics
 from mvpose_nodes.body.model import JOINT_INDEX, LABEL_TORSO, PARAMETER_INDEX, STAGE_NAMES
 from mvpose_nodes.fitting.compiled import MAP_LABELS, pack_frame
 from mvpose_nodes.fitting.hypotheses import (HYPOTHESES_POOL, PERIODIC_PROBE, RELABELLINGS, START_LABELLINGS, Track,
-                                             crossing_judged, face_away, feet_outside, knees_crossed, relabelled_joints,
-                                             relabelled_stages, unexplained_share)
+                                             crossed_cost, crossing_judged, face_away, feet_outside, pair_crossing,
+                                             relabelled_joints, relabelled_stages, unexplained_share)
 from mvpose_nodes.fitting.initialisation import (
     completed_joints, consistent_evidence, facing_right, labelled_joints, person_lengths, stature, tallest_measurements,
     triangulated_joints, upright)
@@ -175,11 +175,13 @@ class SkeletonFitter:
                 leg = self.lengths['thigh'] + self.lengths['shin']
                 closing = settings.crossing_distance <= self.last_apart > apart
                 far = apart >= max(settings.crossing_distance, settings.stride_apart * leg)
-                crossed = knees_crossed(self.track.joints) > 0 and crossing_judged(self.track.joints, self.track.limbs,
-                                                                                   settings)
+                crossed = pair_crossing(self.track.joints, 'knee', 'hip') > 0 and crossing_judged(
+                    self.track.joints, self.track.limbs, settings)
                 if (self.legs_passed and (far or closing)) or crossed:
                     self.legs_passed = False
                     self.probe(stamp, views, found, 'legs exchanged')
+                elif pair_crossing(self.track.joints, 'wrist', 'shoulder') > 0:   # nor do the true wrists
+                    self.probe(stamp, views, found, 'arms exchanged')
                 elif self.since_probe >= settings.probe_period:
                     self.probe(stamp, views, found)
             self.last_apart = apart
@@ -301,7 +303,7 @@ class SkeletonFitter:
         smoothness prior, with the joint limits) with each view's left/right labels oriented to the pose
         and the outline assigned from it; raised by up to face_cost_share as far as the pose's hips face away
         from the face the views see (face_right; hypotheses.face_away), by up to crossed_cost_share as far as its
-        knees cross with the feet together while standing (hypotheses.knees_crossed, crossing_judged: the speed is
+        wrists cross, and its knees with the feet together while standing (hypotheses.crossed_cost: the speed is
         the fit's), and by foot_weight per px² of its feet outside the silhouettes (hypotheses.feet_outside)."""
         joints, _ = forward_kinematics(parameters, self.stages.lengths)
         oriented = [oriented_view(view, joints) for view in views]
@@ -310,9 +312,7 @@ class SkeletonFitter:
         cost = sum(self.stages.posed_cost(stage, parameters, oriented, frame, nearest) for stage in STAGE_NAMES)
         if self.face_right is not None:
             cost *= 1 + self.settings.face_cost_share * face_away(joints, self.face_right)
-        if self.settings.crossed_cost_share and crossing_judged(joints, self.track.limbs, self.settings):
-            crossed = min(1.0, knees_crossed(joints) / self.settings.crossed_knees)
-            cost *= 1 + self.settings.crossed_cost_share * crossed
+        cost = crossed_cost(cost, joints, self.track.limbs, self.settings)
         if self.settings.foot_weight:
             cost += self.settings.foot_weight * feet_outside(views, joints, stature(self.lengths),
                                                              self.settings.ankle_height)

@@ -18,7 +18,8 @@ least over them is kept; later, every probe_period frame sets the body turned ro
 tracked beside the fit for as long, and taken if its fits cost hypothesis_margin less, and so are the
 legs exchanged at each stride (as the fit's ankles come within crossing_distance, and again once they are
 stride_apart of the leg apart) and whenever the fit's knees cross with the feet together while standing
-(knees_crossed, crossing_judged), where crossed knees also raise a labelling's cost. After every
+(pair_crossing, crossing_judged); the arms exchanged whenever the fit's wrists cross; and crossed knees
+(standing so) and wrists raise a labelling's cost. After every
 frame set, tracks whose fits cost hypothesis_prune more than the cheapest's are dropped. A labelling's
 first fit searches only the stages whose pairs it exchanges (relabelled_stages): the legs or the arms
 exchanged keep the fit's torso, head and other limbs, the body turned round searches them all. A track's
@@ -131,20 +132,22 @@ def face_away(joints, face_right):
     return max(0.0, -float(np.dot(hips, face_right)) / max(float(np.linalg.norm(hips)), 1e-9))
 
 
-def knees_crossed(joints):
-    """[m] How far the left knee of joints (15, 3) [m] lies right of the right knee, across the floor along the
-    hips' line; 0 if it lies left of it. The true knees never cross in the suite's tuning motions (the left at
-    least 0.04 m left of the right); a fit's do when its legs are exchanged with the feet together (a turn on
-    the spot: 51 % of such frame sets; a correct fit's in 0-4 %, session 42), where the silhouettes and the
-    stride probes cannot tell the labellings apart."""
-    left = joints[JOINT_INDEX['left_hip']] - joints[JOINT_INDEX['right_hip']]
+def pair_crossing(joints, limb, base):
+    """[m] How far the left `limb` joint of joints (15, 3) [m] lies right of the right one, across the floor along
+    the line of the `base` pair (the hips for knees, the shoulders for wrists); 0 if it lies left of it. In the
+    suite's tuning motions neither the true knees nor the true wrists ever cross (the left knee at least 0.04 m
+    left of the right, the left wrist 0.36 m), nor do a correctly labelled fit's wrists (0.2 % of its frame
+    sets) or, standing, its knees (0 %), while those of a fit with its arms or legs exchanged do (its wrists in
+    63-83 % of such frame sets, its knees in a turn on the spot 51 %; session 42), where the silhouettes cannot
+    tell the labellings apart. (Arms folded or crossed do cross the wrists: those were not in the tuning set.)"""
+    left = joints[JOINT_INDEX[f'left_{base}']] - joints[JOINT_INDEX[f'right_{base}']]
     left[2] = 0.0
-    across = np.dot(joints[JOINT_INDEX['left_knee']] - joints[JOINT_INDEX['right_knee']], left)
+    across = np.dot(joints[JOINT_INDEX[f'left_{limb}']] - joints[JOINT_INDEX[f'right_{limb}']], left)
     return max(0.0, -float(across) / max(float(np.linalg.norm(left)), 1e-9))
 
 
 def crossing_judged(joints, limbs, settings):
-    """Whether the knees' crossing (knees_crossed) tells the legs' labelling of joints (15, 3) [m]: the ankles
+    """Whether the knees' crossing (pair_crossing) tells the legs' labelling of joints (15, 3) [m]: the ankles
     within settings.crossing_distance and the pelvis of the fits in `limbs` (LimbTracks, over walking_baseline)
     slower than settings.standing_speed; not before two fits. Walking, the knees pass close by each other with
     the hips' line turned by the fit as much as 35° off (the rigid torso follows the shoulders, which counter-
@@ -157,6 +160,18 @@ def crossing_judged(joints, limbs, settings):
     speed = np.linalg.norm((history[-1][1][pelvis] - history[0][1][pelvis])[:2]) / (history[-1][0] - history[0][0])
     apart = np.linalg.norm(joints[JOINT_INDEX['left_ankle']] - joints[JOINT_INDEX['right_ankle']])
     return bool(apart < settings.crossing_distance and speed < settings.standing_speed)
+
+
+def crossed_cost(cost, joints, limbs, settings):
+    """A labelling's `cost` (SkeletonFitter.cost_of) raised by settings.crossed_cost_share, in full at a crossing
+    of settings.crossed_by [m] and by as much less for less, for its pose's (joints (15, 3) [m]) knees crossed
+    while crossing_judged (limbs: the fit's LimbTracks), and again for its wrists crossed (pair_crossing)."""
+    crossings = [pair_crossing(joints, 'wrist', 'shoulder')]
+    if crossing_judged(joints, limbs, settings):
+        crossings.insert(0, pair_crossing(joints, 'knee', 'hip'))
+    for crossing in crossings:
+        cost *= 1 + settings.crossed_cost_share * min(1.0, crossing / settings.crossed_by)
+    return cost
 
 
 def on_the_floor(heights, stature, ankle_height):

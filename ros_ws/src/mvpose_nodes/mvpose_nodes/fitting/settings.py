@@ -110,11 +110,12 @@ class FitterSettings:
              "its fit's cost raised by this share when labellings are compared, one side on to it not at all "
              "(hypotheses.face_away; 0: the face is not asked)", 0.0, 100.0)
     crossed_cost_share: float = setting(
-        0.2, 'a labelling whose fit has the knees crossed (hypotheses.knees_crossed) by crossed_knees or more has its '
-             'cost raised by this share when labellings are compared, less crossed by as much less, while the feet '
-             'are together (hypotheses.crossing_judged; 0: the knees are not asked)', 0.0, 100.0)
-    crossed_knees: float = setting(
-        0.05, "[m] the knees' crossing at which crossed_cost_share applies in full", 1e-3, 1.0)
+        0.2, "a labelling whose fit has the wrists crossed (hypotheses.pair_crossing) by crossed_by or more has its "
+             'cost raised by this share when labellings are compared, less crossed by as much less, and so for the '
+             'knees while the feet are together and the person stands (hypotheses.crossing_judged); 0: neither is '
+             'asked', 0.0, 100.0)
+    crossed_by: float = setting(
+        0.05, '[m] the crossing of the knees or of the wrists at which crossed_cost_share applies in full', 1e-3, 1.0)
     standing_speed: float = setting(
         0.5, "[m/s] the knees' crossing is judged while the fit's pelvis moves slower than this over "
              'walking_baseline (standing, turning on the spot, sitting; a stride is judged by its probes)', 0.0, 100.0)
