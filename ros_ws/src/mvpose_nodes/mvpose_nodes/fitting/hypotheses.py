@@ -137,7 +137,7 @@ def pair_crossing(joints, limb, base):
     the line of the `base` pair (the hips for knees, the shoulders for wrists); 0 if it lies left of it. In the
     suite's tuning motions neither the true knees nor the true wrists ever cross (the left knee at least 0.04 m
     left of the right, the left wrist 0.36 m), nor do a correctly labelled fit's wrists (0.2 % of its frame
-    sets) or, standing, its knees (0 %), while those of a fit with its arms or legs exchanged do (its wrists in
+    sets) or, standing, its knees (0-0.2 %), while those of a fit with its arms or legs exchanged do (its wrists in
     63-83 % of such frame sets, its knees in a turn on the spot 51 %; session 42), where the silhouettes cannot
     tell the labellings apart. (Arms folded or crossed do cross the wrists: those were not in the tuning set.)"""
     left = joints[JOINT_INDEX[f'left_{base}']] - joints[JOINT_INDEX[f'right_{base}']]
