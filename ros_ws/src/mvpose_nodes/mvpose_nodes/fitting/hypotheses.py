@@ -148,28 +148,22 @@ def pair_crossing(joints, limb, base):
 
 def crossing_judged(joints, limbs, settings):
     """Whether the knees' crossing (pair_crossing) tells the legs' labelling of joints (15, 3) [m]: the ankles
-    within settings.crossing_distance and the pelvis of the fits in `limbs` (LimbTracks, over walking_baseline)
-    slower than settings.standing_speed; not before two fits. Walking, the knees pass close by each other with
+    within settings.crossing_distance and the pelvis of the fits in `limbs` (LimbTracks.pelvis_speed) slower than
+    settings.standing_speed; not before two fits. Walking, the knees pass close by each other with
     the hips' line turned by the fit as much as 35° off (the rigid torso follows the shoulders, which counter-
     rotate), so crossed knees there are mostly not exchanged legs: judged while striding, they swapped correct
     walks for frame sets at a time (session 42)."""
-    history = limbs.history
-    if len(history) < 2 or history[-1][0] <= history[0][0]:
-        return False
-    pelvis = JOINT_INDEX['pelvis']
-    speed = np.linalg.norm((history[-1][1][pelvis] - history[0][1][pelvis])[:2]) / (history[-1][0] - history[0][0])
+    speed = limbs.pelvis_speed()
     apart = np.linalg.norm(joints[JOINT_INDEX['left_ankle']] - joints[JOINT_INDEX['right_ankle']])
-    return bool(apart < settings.crossing_distance and speed < settings.standing_speed)
+    return speed is not None and bool(apart < settings.crossing_distance and speed < settings.standing_speed)
 
 
 def crossed_cost(cost, joints, limbs, settings):
     """A labelling's `cost` (SkeletonFitter.cost_of) raised by settings.crossed_cost_share, in full at a crossing
     of settings.crossed_by [m] and by as much less for less, for its pose's (joints (15, 3) [m]) knees crossed
     while crossing_judged (limbs: the fit's LimbTracks), and again for its wrists crossed (pair_crossing)."""
-    crossings = [pair_crossing(joints, 'wrist', 'shoulder')]
-    if crossing_judged(joints, limbs, settings):
-        crossings.insert(0, pair_crossing(joints, 'knee', 'hip'))
-    for crossing in crossings:
+    knees = [pair_crossing(joints, 'knee', 'hip')] if crossing_judged(joints, limbs, settings) else []
+    for crossing in knees + [pair_crossing(joints, 'wrist', 'shoulder')]:
         cost *= 1 + settings.crossed_cost_share * min(1.0, crossing / settings.crossed_by)
     return cost
 

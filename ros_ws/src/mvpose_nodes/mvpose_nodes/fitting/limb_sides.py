@@ -65,6 +65,15 @@ class LimbTracks:
         t0, p0 = self.history[-2]
         return p1 + (p1 - p0) * (stamp - t1) / (t1 - t0)
 
+    def pelvis_speed(self):
+        """[m/s] The pelvis's speed across the floor over the fits remembered (walking_baseline), or None before
+        two of them."""
+        if len(self.history) < 2 or self.history[-1][0] <= self.history[0][0]:
+            return None
+        (t0, p0), (t1, p1) = self.history[0], self.history[-1]
+        pelvis = JOINT_INDEX['pelvis']
+        return float(np.linalg.norm((p1[pelvis] - p0[pelvis])[:2]) / (t1 - t0))
+
     def label(self, stamp, found):
         """Exchange, in `found` ({joint: (3,)} triangulated), the pairs nearer the other side's predicted
         positions: (d(a, p_r)² + d(b, p_l)² − d(a, p_l)² − d(b, p_r)²) < 0 for the pair's points a (left),
