@@ -202,9 +202,12 @@ def feet_outside(views, joints, stature, ankle_height):
 def unexplained_share(views, joints):
     """The share of the silhouettes' outline that the skeleton joints (15, 3) [m] does not explain: per view
     with an outline, its points further than LOST_MARGIN (in metres at the pelvis's depth) from every
-    projected bone; the median over the views. 0 without outlines. Measured on the suite's tuning cases:
-    0-4 % for fits that follow the person (also with arms overhead, where the head and neck keypoints are
-    0.3-0.6 m off and cannot tell), 30-70 % for runs fitted 0.5-1.7 m off; a mirrored fit explains the
+    projected bone; the median over the views. 0 without outlines. Measured on the suite's 70 tuning cases
+    (seeds 1-6) fitted by this code and by two variants that lose the person more often (9552 frame sets;
+    docs/method.md, session 43): at most 9.6 % for fits within 80 mm of the truth (99.9th percentile 3.8 %,
+    also with arms overhead, where the head and neck keypoints are 0.3-0.6 m off and cannot tell); 27 % of
+    the fits over 200 mm off leave more than 15 % unexplained (one with its pelvis 0.4 m high 27-30 % for 30
+    frame sets), 0.5 % more than 30 %; runs fitted 0.5-1.7 m off 30-70 %. A mirrored fit explains the
     outline as well as the right one (0-9 %), so this cannot see that (hypotheses.py does)."""
     shares = []
     for view in views:

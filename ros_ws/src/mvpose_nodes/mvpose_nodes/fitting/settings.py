@@ -48,8 +48,8 @@ class FitterSettings:
         0.5, '[s] a larger gap between frame sets (or going back in time) re-initialises, unless frame sets were '
              'skipped in it to keep up (the fit then follows on)', 0.01, 3600.0)
     lost_share: float = setting(
-        0.3, "a fit that leaves more than this share of the outline unexplained (median over the views; "
-             "hypotheses.unexplained_share) has left the person", 0.0, 1.0)
+        0.15, "a fit that leaves more than this share of the outline unexplained (median over the views; "
+              "hypotheses.unexplained_share) has left the person", 0.0, 1.0)
     lost_frames: int = setting(2, 'after this many such fits in a row the fit is lost: said so '
                                   '(STATUS_LOST) and re-initialised on the next frame set', 1, 1000)
     ankle_height: float = setting(0.039, "the ankle's height, as a share of the stature (the template's)", 0.0, 0.2)
