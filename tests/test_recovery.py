@@ -48,9 +48,9 @@ def test_the_true_pose_explains_the_outlines_and_one_moved_away_does_not(walk):
 
 
 def test_a_skeleton_floating_above_the_person_counts_as_lost(walk):
-    """A fit seen on a tuning walk (session 43): its pelvis 0.4 m above the person's for 30 frame sets, 27-30 %
-    of the outline unexplained, which lost_share's earlier 0.3 never called lost. Here the true pose raised
-    0.4 m leaves 17-29 %."""
+    """A fit seen on a tuning walk (session 43, by a variant of the fitter not kept): its pelvis 0.4 m above the
+    person's for 30 frame sets, 27-30 % of the outline unexplained, which lost_share's earlier 0.3 never
+    called lost. Here the true pose raised 0.4 m leaves 17-29 %."""
     lost_share = FitterSettings().lost_share
     for truth, views in walk:
         assert unexplained_share(views, truth + (0.0, 0.0, 0.4)) > lost_share

@@ -206,9 +206,9 @@ def unexplained_share(views, joints):
     (seeds 1-6) fitted by this code and by two variants that lose the person more often (9552 frame sets;
     docs/method.md, session 43): at most 9.6 % for fits within 80 mm of the truth (99.9th percentile 3.8 %,
     also with arms overhead, where the head and neck keypoints are 0.3-0.6 m off and cannot tell); 27 % of
-    the fits over 200 mm off leave more than 15 % unexplained (one with its pelvis 0.4 m high 27-30 % for 30
-    frame sets), 0.5 % more than 30 %; runs fitted 0.5-1.7 m off 30-70 %. A mirrored fit explains the
-    outline as well as the right one (0-9 %), so this cannot see that (hypotheses.py does)."""
+    the fits over 200 mm off leave more than 15 % unexplained (a variant's walk with its pelvis 0.4 m high:
+    27-30 % for 30 frame sets), 0.5 % more than 30 %; runs fitted 0.5-1.7 m off 30-70 %. A mirrored fit
+    explains the outline as well as the right one (0-9 %), so this cannot see that (hypotheses.py does)."""
     shares = []
     for view in views:
         if view.outline is None or not len(view.outline.points):
