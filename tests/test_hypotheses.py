@@ -232,8 +232,7 @@ def test_crossed_knees_standing_and_crossed_wrists_cost_more_and_are_probed(turn
     from mvpose_nodes.body.kinematics import forward_kinematics, inverse_kinematics
     from mvpose_nodes.fitting.hypotheses import pair_crossing
     from mvpose_nodes.fitting.limb_sides import exchanged_pairs
-    base = {'knee': 'hip', 'wrist': 'shoulder'}[pair]
-    other = {'knee': ('wrist', 'shoulder'), 'wrist': ('knee', 'hip')}[pair]
+    other = {'knee': 'wrist', 'wrist': 'knee'}[pair]
     monkeypatch.setattr(fitter_module, 'START_LABELLINGS', ())
     share = FitterSettings().crossed_cost_share
     for frames, standing in ((turn, True), (walk, False)):
@@ -243,8 +242,8 @@ def test_crossed_knees_standing_and_crossed_wrists_cost_more_and_are_probed(turn
             fitter.fit(index / 25.0, frames[index][1])
         crossed = inverse_kinematics(exchanged_pairs(fitter.track.joints, RELABELLINGS[labelling]))
         crossed_joints = forward_kinematics(crossed, fitter.lengths)[0]
-        assert pair_crossing(crossed_joints, pair, base) >= fitter.settings.crossed_by
-        assert pair_crossing(crossed_joints, *other) == 0.0
+        assert pair_crossing(crossed_joints, pair) >= fitter.settings.crossed_by
+        assert pair_crossing(crossed_joints, other) == 0.0
         views = frames[3][1]
         costs = [fitter.cost_of(crossed, views)]
         fitter.settings = replace(fitter.settings, crossed_cost_share=0.0)
@@ -253,7 +252,7 @@ def test_crossed_knees_standing_and_crossed_wrists_cost_more_and_are_probed(turn
         assert costs[0] == pytest.approx(costs[1] * (1 + share if judged else 1.0), rel=1e-12), costs
         probed = []
         monkeypatch.setattr(fitter, 'probe', lambda *args: probed.append(args[-1]))
-        monkeypatch.setattr(fitter_module, 'pair_crossing', lambda joints, limb, _: 0.1 if limb == pair else 0.0)
+        monkeypatch.setattr(fitter_module, 'pair_crossing', lambda joints, limb: 0.1 if limb == pair else 0.0)
         fitter.fit(3 / 25.0, views)
         monkeypatch.undo()
         monkeypatch.setattr(fitter_module, 'START_LABELLINGS', ())
@@ -261,9 +260,9 @@ def test_crossed_knees_standing_and_crossed_wrists_cost_more_and_are_probed(turn
 
 
 def test_pairs_cross_and_knees_are_judged_only_standing(turn, walk):
-    """pair_crossing: 0 for the true knees and wrists of the turn and of the walk, the crossing [m] across the hips'
-    (the shoulders') line with the knees (the wrists) exchanged. crossing_judged: only with the ankles within crossing_distance, the pelvis
-    slower than standing_speed over the fits' history, and two fits in it."""
+    """pair_crossing: 0 for the true knees and wrists of the turn and of the walk, the crossing [m] across the
+    hips' (the shoulders') line with the knees (the wrists) exchanged. crossing_judged: only with the ankles within
+    crossing_distance, the pelvis slower than standing_speed over the fits' history, and two fits in it."""
     from mvpose_nodes.fitting.hypotheses import crossing_judged, pair_crossing
     from mvpose_nodes.fitting.limb_sides import LimbTracks
     settings = FitterSettings()
@@ -271,13 +270,13 @@ def test_pairs_cross_and_knees_are_judged_only_standing(turn, walk):
         ends = [JOINT_NAMES.index(f'left_{limb}'), JOINT_NAMES.index(f'right_{limb}')]
         line = [JOINT_NAMES.index(f'left_{base}'), JOINT_NAMES.index(f'right_{base}')]
         for truth, _ in turn + walk:
-            assert pair_crossing(truth.copy(), limb, base) == 0.0
+            assert pair_crossing(truth.copy(), limb) == 0.0
             exchanged = truth.copy()
             exchanged[ends] = exchanged[ends[::-1]]
             left = truth[line[0]] - truth[line[1]]
             left[2] = 0.0
             across = np.dot(truth[ends[0]] - truth[ends[1]], left) / np.linalg.norm(left)
-            assert pair_crossing(exchanged, limb, base) == pytest.approx(across, abs=1e-12)
+            assert pair_crossing(exchanged, limb) == pytest.approx(across, abs=1e-12)
     standing, striding = LimbTracks(settings), LimbTracks(settings)
     assert not crossing_judged(turn[0][0], standing, settings)
     for index in range(3):

@@ -175,12 +175,12 @@ class SkeletonFitter:
                 leg = self.lengths['thigh'] + self.lengths['shin']
                 closing = settings.crossing_distance <= self.last_apart > apart
                 far = apart >= max(settings.crossing_distance, settings.stride_apart * leg)
-                crossed = pair_crossing(self.track.joints, 'knee', 'hip') > 0 and crossing_judged(
+                crossed = pair_crossing(self.track.joints, 'knee') > 0 and crossing_judged(
                     self.track.joints, self.track.limbs, settings)
                 if (self.legs_passed and (far or closing)) or crossed:
                     self.legs_passed = False
                     self.probe(stamp, views, found, 'legs exchanged')
-                elif pair_crossing(self.track.joints, 'wrist', 'shoulder') > 0:   # nor do the true wrists
+                elif pair_crossing(self.track.joints, 'wrist') > 0:   # nor do the true wrists
                     self.probe(stamp, views, found, 'arms exchanged')
                 elif self.since_probe >= settings.probe_period:
                     self.probe(stamp, views, found)

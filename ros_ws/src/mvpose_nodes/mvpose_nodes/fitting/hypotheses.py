@@ -132,14 +132,19 @@ def face_away(joints, face_right):
     return max(0.0, -float(np.dot(hips, face_right)) / max(float(np.linalg.norm(hips)), 1e-9))
 
 
-def pair_crossing(joints, limb, base):
-    """[m] How far the left `limb` joint of joints (15, 3) [m] lies right of the right one, across the floor along
-    the line of the `base` pair (the hips for knees, the shoulders for wrists); 0 if it lies left of it. In the
-    suite's tuning motions neither the true knees nor the true wrists ever cross (the left knee at least 0.04 m
-    left of the right, the left wrist 0.36 m), nor do a correctly labelled fit's wrists (0.2 % of its frame
-    sets) or, standing, its knees (0-0.2 %), while those of a fit with its arms or legs exchanged do (its wrists in
-    63-83 % of such frame sets, its knees in a turn on the spot 51 %; session 42), where the silhouettes cannot
-    tell the labellings apart. (Arms folded or crossed do cross the wrists: those were not in the tuning set.)"""
+CROSSING_BASE = {'knee': 'hip', 'wrist': 'shoulder'}   # the pair whose line a limb pair's crossing is measured across
+
+
+def pair_crossing(joints, limb):
+    """[m] How far the left `limb` joint ('knee' or 'wrist') of joints (15, 3) [m] lies right of the right one,
+    across the floor along the line of its CROSSING_BASE pair (the hips, the shoulders); 0 if it lies left of
+    it. In the suite's tuning motions neither the true knees nor the true wrists ever cross (the left knee at
+    least 0.04 m left of the right, the left wrist 0.36 m), nor do a correctly labelled fit's wrists (0.2 % of
+    its frame sets) or, standing, its knees (0-0.2 %), while those of a fit with its arms or legs exchanged do
+    (its wrists in 63-83 % of such frame sets, its knees in a turn on the spot 51 %; session 42), where the
+    silhouettes cannot tell the labellings apart. (Arms folded or crossed do cross the wrists: those were not
+    in the tuning set.)"""
+    base = CROSSING_BASE[limb]
     left = joints[JOINT_INDEX[f'left_{base}']] - joints[JOINT_INDEX[f'right_{base}']]
     left[2] = 0.0
     across = np.dot(joints[JOINT_INDEX[f'left_{limb}']] - joints[JOINT_INDEX[f'right_{limb}']], left)
@@ -162,8 +167,8 @@ def crossed_cost(cost, joints, limbs, settings):
     """A labelling's `cost` (SkeletonFitter.cost_of) raised by settings.crossed_cost_share, in full at a crossing
     of settings.crossed_by [m] and by as much less for less, for its pose's (joints (15, 3) [m]) knees crossed
     while crossing_judged (limbs: the fit's LimbTracks), and again for its wrists crossed (pair_crossing)."""
-    knees = [pair_crossing(joints, 'knee', 'hip')] if crossing_judged(joints, limbs, settings) else []
-    for crossing in knees + [pair_crossing(joints, 'wrist', 'shoulder')]:
+    knees = [pair_crossing(joints, 'knee')] if crossing_judged(joints, limbs, settings) else []
+    for crossing in knees + [pair_crossing(joints, 'wrist')]:
         cost *= 1 + settings.crossed_cost_share * min(1.0, crossing / settings.crossed_by)
     return cost
 
