@@ -114,8 +114,13 @@ def test_backlog_growth_compares_the_first_and_last_quarter():
 def test_fitted_share_by_quarter_of_the_frame_sets_sent():
     sent = {stamp: 0.04 * stamp for stamp in range(10)}   # quarters of 10: stamps 0-1, 2-4, 5-7, 8-9
     fitted = {stamp: (0.04 * stamp + 0.2, 0.05) for stamp in (0, 3, 4, 6, 7, 8, 9)}
-    assert bench.fitted_by_quarter(sent, fitted) == [(1, 2), (2, 3), (2, 3), (2, 2)]
-    assert bench.fitted_by_quarter(sent, {}) == [(0, 2), (0, 3), (0, 3), (0, 2)]
+    errors = {0: 30.0, 3: 20.0, 4: 40.0, 6: 25.0, 8: 100.0, 9: 200.0}   # stamp 7 without ground truth
+    quarters = bench.fitted_by_quarter(sent, fitted, errors)
+    assert [(done, count) for done, count, _ in quarters] == [(1, 2), (2, 3), (2, 3), (2, 2)]
+    assert [error for _, _, error in quarters] == pytest.approx([30.0, 30.0, 25.0, 150.0])
+    nothing = bench.fitted_by_quarter(sent, {}, {})
+    assert [(done, count) for done, count, _ in nothing] == [(0, 2), (0, 3), (0, 3), (0, 2)]
+    assert all(math.isnan(error) for _, _, error in nothing)
 
 
 def test_open_loop_table_reports_share_fitted_skips_and_error():
@@ -128,7 +133,8 @@ def test_open_loop_table_reports_share_fitted_skips_and_error():
     assert "open loop at 1× the bag's speed: 2 of 4 frame sets fitted (50 %), 2 skipped by the fitter as stale" in table
     assert '(2 of 4 fitted, 1 passed over (a later one was fitted), 1 dropped (no answer in 60 s))' in table
     assert 'mean joint error of the fitted frame sets: 35 mm (2 with ground truth)' in table
-    assert 'fitted in each quarter of the frame sets sent: 1 of 1, 0 of 1, 1 of 1, 0 of 1' in table
+    assert ('fitted in each quarter of the frame sets sent (their mean joint error): 1 of 1 (30 mm), 0 of 1 (- mm), '
+            '1 of 1 (40 mm), 0 of 1 (- mm)') in table
     assert re.search(r'skeleton_fitter\s+fit 50\.0\s+total 100\.0', table)      # ms per frame set sent
 
 

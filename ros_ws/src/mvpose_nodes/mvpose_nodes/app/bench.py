@@ -29,8 +29,8 @@ core decoding the bag's images could deliver, and nothing else. CPU seconds and 
 over the run (from /proc/PID/stat), peak RSS over the node's whole life (VmHWM). Where each node's CPU
 goes, stage by stage (and the skeleton_fitter's hypotheses pool, which does part of its fit, apart from
 DDS's threads), comes from the nodes' own /diagnostics (ros/diagnostics.py) at the start and the end of
-the run. In open loop, how many frame sets were fitted in each quarter of the run (a start costs the
-first most) and the fitted frame sets' mean joint error against the bag's /mvpose/ground_truth.
+the run. In open loop, the fitted frame sets' mean joint error against the bag's /mvpose/ground_truth,
+and per quarter of the run how many were fitted and their error (a start costs the first most).
 
 `./mvpose soak [BAG] [--frame-sets N]`: the same closed loop for N frame sets, the bag's frame sets sent
 again and again with their stamps moved on by the bag's length each time (so that to the graph they are
