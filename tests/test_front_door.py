@@ -100,6 +100,8 @@ def test_echo_without_publisher_times_out_cleanly():
 def test_bad_input_is_one_line(tmp_path):
     assert_one_line_error(run_mvpose('bench', '--window', 0, check=False), '--window must be at least 1')
     assert_one_line_error(run_mvpose('bench', tmp_path / 'nothing', check=False), 'not found')
+    (tmp_path / 'run').mkdir()
+    assert_one_line_error(run_mvpose('bench', tmp_path, '-o', tmp_path / 'run', check=False), 'already exists')
     from rclpy.serialization import serialize_message
     from sensor_msgs.msg import CameraInfo
     from mvpose_nodes.io.bagfile import BagWriter

@@ -16,11 +16,11 @@ pytestmark = pytest.mark.graph
 
 
 @pytest.mark.timeout(150)
-def test_bench_runs_every_frame_set_through_the_graph(synth_bag):
+def test_bench_runs_every_frame_set_through_the_graph(synth_bag, tmp_path):
     bag = synth_bag('--cameras', 3, 5, 7, '--frames', '70-73', '--resolution', '960x540')
     # One frame set in flight: with two, a fitter slower than the cameras (a loaded machine) rightly asks for
     # the newer of two announced sets and passes the older over (frame requests), and not every set is fitted.
-    result = run_mvpose('bench', bag, '--window', 1, timeout=90)
+    result = run_mvpose('bench', bag, '--window', 1, '-o', tmp_path / 'run', timeout=90)
     table = result.stdout
     assert '(4 frame sets, cameras 3 5 7, 960×540, window 1)' in table
     assert '4 of 4 fitted, none dropped' in table
@@ -35,6 +35,8 @@ def test_bench_runs_every_frame_set_through_the_graph(synth_bag):
         assert row, f'{node} row missing:\n{table}'
         assert float(row.group(3)) > 20     # peak RSS of a Python node with rclpy and numpy [MiB]
     assert '[bench]' in result.stderr       # the progress bar
+    # -o: the fitted skeletons, which eval compares with the bag's truth frame set by frame set.
+    assert '(4 frames matched by stamp)' in run_mvpose('eval', tmp_path / 'run', '--truth', bag).stdout
 
 
 @pytest.mark.timeout(240)

@@ -30,7 +30,8 @@ over the run (from /proc/PID/stat), peak RSS over the node's whole life (VmHWM).
 goes, stage by stage (and the skeleton_fitter's hypotheses pool, which does part of its fit, apart from
 DDS's threads), comes from the nodes' own /diagnostics (ros/diagnostics.py) at the start and the end of
 the run. In open loop, the fitted frame sets' mean joint error against the bag's /mvpose/ground_truth,
-and per quarter of the run how many were fitted and their error (a start costs the first most).
+and per quarter of the run how many were fitted and their error (a start costs the first most). With
+-o RUN the fitted skeletons are recorded to a bag, for `./mvpose eval RUN --truth BAG`.
 
 `./mvpose soak [BAG] [--frame-sets N]`: the same closed loop for N frame sets, the bag's frame sets sent
 again and again with their stamps moved on by the bag's length each time (so that to the graph they are
@@ -51,7 +52,7 @@ from pathlib import Path
 
 import numpy as np
 
-from mvpose_nodes.app.graph_run import ALL_CAMERAS, GRAPH_CAMERAS
+from mvpose_nodes.app.graph_run import ALL_CAMERAS, GRAPH_CAMERAS, GraphRun, write_run_bag
 from mvpose_nodes.app.reports.benchmark import (STALL_TIMEOUT, BenchResult, SoakSample, cpu_split, format_soak,
                                                 format_table, median_p95, node_usage, resident_mib, sample_process)
 from mvpose_nodes.tools.cli import ArgumentParser, UserError, exit_on_user_error
@@ -154,10 +155,12 @@ def decode_times(frame_sets):
     return times, shape
 
 
-def run_bench(bag, window, rate, limit, log_path, total=None, sample_every=None, cameras=GRAPH_CAMERAS):
+def run_bench(bag, window, rate, limit, log_path, total=None, sample_every=None, cameras=GRAPH_CAMERAS,
+              keep_messages=False):
     """The bench run (the module's docstring) of the graph of `cameras` (graph_run.launch_file); with `total`,
     that many frame sets (LoopedFrameSets), and with `sample_every`, a SoakSample in result.samples each time
-    that many more frame sets are answered."""
+    that many more frame sets are answered; with `keep_messages`, the fitted Skeleton messages in
+    result.messages."""
     import rclpy
     from diagnostic_msgs.msg import DiagnosticArray
     from rclpy.qos import QoSProfile, ReliabilityPolicy
@@ -212,6 +215,8 @@ def run_bench(bag, window, rate, limit, log_path, total=None, sample_every=None,
                 return   # no fit: the last pose repeated (counted as too few views below)
             if stamp in result.sent and stamp not in result.skeletons:
                 result.skeletons[stamp] = (time.monotonic(), message.fit_time)
+                if keep_messages:
+                    result.messages[stamp] = message
                 answered[stamp] = 'fitted'
                 if stamp in truth:
                     result.errors_mm[stamp] = 1e3 * float(np.linalg.norm(
@@ -378,6 +383,9 @@ def main(argv=None, prog='bench'):
     parser.add_argument('--all-cameras', action='store_true',
                         help='the graph of all 8 cameras (launch/mvpose8.launch.yaml) on a bag that has them, '
                              'instead of cameras 3, 5, 7')
+    parser.add_argument('-o', '--output', type=Path, metavar='RUN',
+                        help='also record the fitted skeletons to this bag (at --rate 1.0: the frame sets the fitter '
+                             'took), for `./mvpose eval RUN --truth BAG` (Table 2, Eq. 12 per frame set, swaps)')
     parser.add_argument('--transport', action='store_true',
                         help="instead of running the graph: size, serialisation and DDS round trip of a camera's "
                              'messages (image in; silhouette raw and PNG, contour, ellipses out)')
@@ -398,14 +406,21 @@ def main(argv=None, prog='bench'):
                 raise UserError(f'{DEFAULT_BAG} is missing: run {MAKE_DEFAULT_BAG}')
         elif not bag.exists():
             raise UserError(f"bag '{bag}' not found")
+        if args.output is not None and args.output.exists():
+            raise UserError(f"output bag '{args.output}' already exists; choose another -o or remove it")
         if args.transport:
             print(run_transport(bag), flush=True)
             return 0
         result = run_bench(bag, args.window, args.rate, args.frames, root / 'output' / 'bench' / 'graph.log',
-                           cameras=ALL_CAMERAS if args.all_cameras else GRAPH_CAMERAS)
+                           cameras=ALL_CAMERAS if args.all_cameras else GRAPH_CAMERAS,
+                           keep_messages=args.output is not None)
         if bag.is_relative_to(root):
             result.bag = str(bag.relative_to(root))
         print(format_table(result), flush=True)
+        if args.output is not None:
+            write_run_bag(GraphRun(fitted=result.messages), args.output)
+            print(f'[bench] the {len(result.messages)} fitted skeletons -> {args.output} '
+                  f'(`./mvpose eval {args.output} --truth {result.bag}`)', file=sys.stderr, flush=True)
     # Closed loop every frame set must be fitted; open loop, skipping is the point and the table says how much.
     return 0 if args.rate is not None or len(result.skeletons) == result.frame_sets else 1
 

@@ -155,6 +155,7 @@ class BenchResult:
     sent: dict = field(default_factory=dict)        # stamp -> t published
     features: dict = field(default_factory=dict)    # stamp -> {camera: t contour received}
     skeletons: dict = field(default_factory=dict)   # stamp -> (t received, fit_time)
+    messages: dict = field(default_factory=dict)    # stamp -> the fitted Skeleton message (bench -o only)
     unfitted: int = 0                               # frame sets the fitter had too few views for
     dropped: int = 0                                # frame sets without any answer within STALL_TIMEOUT
     overtaken: int = 0                              # frame sets unanswered when a later one was fitted (skipped)
