@@ -137,8 +137,9 @@ def fitted_by_quarter(sent, skeletons, errors_mm):
     bounds = np.linspace(0, len(stamps), 5).round().astype(int)
     quarters = []
     for first, last in zip(bounds[:-1], bounds[1:]):
-        errors = [errors_mm[stamp] for stamp in stamps[first:last] if stamp in errors_mm]
-        quarters.append((sum(stamp in skeletons for stamp in stamps[first:last]), int(last - first),
+        part = stamps[first:last]
+        errors = [errors_mm[stamp] for stamp in part if stamp in errors_mm]
+        quarters.append((sum(stamp in skeletons for stamp in part), len(part),
                          float(np.mean(errors)) if errors else float('nan')))
     return quarters
 
