@@ -89,17 +89,36 @@ def standing_body(root):
 
 
 def test_pairs_are_labelled_by_the_side_of_the_body_they_are_on():
-    """label_across: of a triangulated pair, the point on the left hip's (the left shoulder's) side is the
-    left one, however far the two are apart front to back."""
-    for name, root in (('knee', 'hip'), ('wrist', 'shoulder')):
-        joints, across, forward = standing_body(root)
-        left_root, right_root = joints[JOINT_INDEX[f'left_{root}']], joints[JOINT_INDEX[f'right_{root}']]
+    """label_across: of a triangulated pair, the point on the left shoulder's side is the left one, however
+    far the two are apart front to back."""
+    for name in ('knee', 'wrist'):
+        joints, across, forward = standing_body('shoulder')
+        left_root, right_root = joints[JOINT_INDEX['left_shoulder']], joints[JOINT_INDEX['right_shoulder']]
         on_left, on_right = left_root + 0.4 * forward, right_root - 0.4 * forward   # a stride apart
         found = {f'left_{name}': on_right, f'right_{name}': on_left, 'pelvis': joints[JOINT_INDEX['pelvis']]}
         label_across(found, joints)
         assert found[f'left_{name}'] is on_left and found[f'right_{name}'] is on_right
         label_across(found, joints)   # labelled right: left as it is
         assert found[f'left_{name}'] is on_left
+
+
+def test_a_strides_feet_are_labelled_across_the_shoulders_not_the_fits_turned_hips():
+    """A fit's hips' line is often 15-40 degrees off while its shoulders' is right (docs/method.md, session 43).
+    Mid-stride the feet are 0.7 m apart front to back and 0.1 m side to side: across hips turned 20 degrees they
+    would lie on the wrong sides; across the shoulders they are labelled right."""
+    joints, across, forward = standing_body('shoulder')
+    turn = math.radians(20)
+    for side in ('left', 'right'):   # the hips turned about the pelvis, level
+        offset = joints[JOINT_INDEX[f'{side}_hip']] - joints[JOINT_INDEX['pelvis']]
+        width = np.dot(offset, across)
+        joints[JOINT_INDEX[f'{side}_hip']] = joints[JOINT_INDEX['pelvis']] + width * (
+            math.cos(turn) * across - math.sin(turn) * forward) + (0.0, 0.0, offset[2])
+    hips = joints[JOINT_INDEX['left_hip']] - joints[JOINT_INDEX['right_hip']]
+    left_foot, right_foot = 0.05 * across + 0.35 * forward, -0.05 * across - 0.35 * forward
+    assert np.dot(left_foot - right_foot, hips) < 0   # the hips' side would exchange them
+    found = {'left_ankle': right_foot, 'right_ankle': left_foot}
+    label_across(found, joints)
+    assert found['left_ankle'] is left_foot and found['right_ankle'] is right_foot
 
 
 def test_pairs_a_few_frame_periods_on_are_labelled_by_continuity():

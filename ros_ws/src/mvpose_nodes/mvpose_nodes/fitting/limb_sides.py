@@ -16,7 +16,6 @@ from mvpose_nodes.fitting.objective import segment_points
 from mvpose_nodes.fitting.stage_search import STAGE_BONES
 
 SWAPPABLE = {'legs': ('knee', 'ankle'), 'arms': ('elbow', 'wrist')}
-ACROSS_ROOT = {'knee': 'hip', 'ankle': 'hip', 'elbow': 'shoulder', 'wrist': 'shoulder'}   # where each limb starts
 # The legs' labelled bones (thigh, shin) by part label, as the leg stages have them (stage_search.STAGE_BONES),
 # and the points per bone that say which labelled leg's part it lies on (legs_on_other_labels).
 LEG_BONES = {label: [name for name, _ in STAGE_BONES[stage]]
@@ -98,16 +97,17 @@ class LimbTracks:
 
 def label_across(found, joints):
     """Exchange, in `found` ({joint: (3,)} triangulated), the pairs whose left point lies right of the
-    right one across the body of `joints` (15, 3) [m]: (a − b)·(left_hip − right_hip) < 0 for the legs'
-    points a (left), b (right), the shoulders for the arms'. For fits too far apart in time for
-    continuity: half a second on, a walker's legs have changed places front to back, not side to side."""
+    right one across the body of `joints` (15, 3) [m]: (a − b)·(left_shoulder − right_shoulder) < 0 for the
+    pair's points a (left), b (right). For fits too far apart in time for continuity: half a second on, a
+    walker's legs have changed places front to back, not side to side. The legs too are judged across the
+    shoulders, not the hips: the fits' hips' line is often 15–40° off for whole walks while the shoulders'
+    is within a few degrees (docs/method.md, session 43), and a stride's feet, far apart front to back and
+    little side to side, then lie on the wrong sides of it (the tuning cases' fits 6 frame periods before:
+    the ankles' sides right in 93.5 % across the hips, 99.0 % across the shoulders; session 45)."""
+    across = joints[JOINT_INDEX['left_shoulder']] - joints[JOINT_INDEX['right_shoulder']]
     for name in ('knee', 'ankle', 'elbow', 'wrist'):
         left, right = f'left_{name}', f'right_{name}'
-        if left not in found or right not in found:
-            continue
-        root = ACROSS_ROOT[name]
-        across = joints[JOINT_INDEX[f'left_{root}']] - joints[JOINT_INDEX[f'right_{root}']]
-        if np.dot(found[left] - found[right], across) < 0:
+        if left in found and right in found and np.dot(found[left] - found[right], across) < 0:
             exchange(found, name)
 
 
