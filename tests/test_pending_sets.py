@@ -158,3 +158,14 @@ def test_request_overlap_names_the_stages_that_may_still_be_busy():
             assert ready_to_request(False, stages, 1) == (not maps_busy)
             assert ready_to_request(False, stages, 0) == (not maps_busy and not fit_busy)
             assert not any(ready_to_request(True, stages, overlap) for overlap in (0, 1, 2))
+
+
+def test_no_set_is_asked_for_while_a_start_is_fitted():
+    """A start fits every labelling (several fits' time): whatever request_overlap says, the next set is asked
+    for only once both stages are free, as with overlap 0."""
+    for maps_busy in (False, True):
+        for fit_busy in (False, True):
+            stages = (maps_busy, fit_busy)
+            for overlap in (0, 1, 2):
+                assert ready_to_request(False, stages, overlap, starting=True) == (not maps_busy and not fit_busy)
+                assert not ready_to_request(True, stages, overlap, starting=True)

@@ -67,6 +67,21 @@ def test_a_fit_knocked_off_the_person_is_lost_then_reinitialised_and_right_again
     assert not any(is_lost or initialised for is_lost, initialised, _ in found[settings.hypothesis_frames:KNOCKED_AT]), found
 
 
+def test_starts_next_names_the_starts_before_they_run(walk):
+    """The node asks the cameras for nothing while a start is fitted (sync.ready_to_request), so starts_next
+    must say beforehand which fits start: the first, and the one after the knocked fit is lost."""
+    fitter, predicted, started = SkeletonFitter(FitterSettings()), [], []
+    start = fitter.start
+    fitter.start = lambda *arguments: (started.append(len(predicted) - 1), start(*arguments))
+    for i, (truth, views) in enumerate(walk):
+        if i == KNOCKED_AT:
+            fitter.parameters[TORSO_POSITION] += KNOCK
+        predicted.append(fitter.starts_next)
+        fitter.fit(i / 25.0, views)
+    assert started == [i for i, starts in enumerate(predicted) if starts], (started, predicted)
+    assert started[0] == 0 and len(started) == 2 and started[1] > KNOCKED_AT, started
+
+
 def test_without_the_check_the_knocked_fit_stays_off(walk):
     """The check above can fail: without it, the knocked fit stays off the person."""
     found = knocked_fits(walk, FitterSettings(lost_share=1.0))

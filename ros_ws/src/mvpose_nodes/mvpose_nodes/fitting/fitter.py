@@ -128,6 +128,11 @@ class SkeletonFitter:
         self.last_found = None    # the last frame set's triangulated joints {name: (3,) [m]} (or None)
 
     @property
+    def starts_next(self):
+        """Whether the next fit starts (no fit yet, or the person lost; a jump in time shows only in its stamp)."""
+        return self.track is None or self.lost_fits >= self.settings.lost_frames
+
+    @property
     def parameters(self):
         """The 29 parameters of the last fit given out, or None before the first."""
         return None if self.given is None else self.given.parameters
@@ -154,7 +159,7 @@ class SkeletonFitter:
             views, found = consistent_evidence(views, found, settings)
             self.measure(found)
             self.face_right = facing_right(views, found, settings.face_evidence)
-        if self.track is None or jump or self.lost_fits >= settings.lost_frames:
+        if jump or self.starts_next:
             self.start(stamp, views, found)
         else:
             comparing = bool(self.rivals)

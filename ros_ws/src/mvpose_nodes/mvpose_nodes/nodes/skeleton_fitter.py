@@ -17,10 +17,11 @@ flushed and fitted (a bag's end); a bag played again starts them afresh.
 
 With request_frames (the default) the fitter also paces the cameras: it synchronises the stamps they
 announce on /cam<K>/frame_available (std_msgs/Header, one per image) and, each time nothing waits before
-its two stages (and, with request_overlap below 2, the stages it names are idle), asks every camera for the
-newest announced set on /cam<K>/frame_request (std_msgs/Header, that camera's image stamp). Cameras that
-follow requests (camera_features' follow_requests) compute features only for those: frames the graph cannot
-keep up with are skipped whole, before any camera spends CPU on them, and counted as skipped.
+its two stages (and, with request_overlap below 2, the stages it names are idle; both while a start is
+fitted), asks every camera for the newest announced set on /cam<K>/frame_request (std_msgs/Header, that
+camera's image stamp). Cameras that follow requests (camera_features' follow_requests) compute features
+only for those: frames the graph cannot keep up with are skipped whole, before any camera spends CPU on
+them, and counted as skipped.
 """
 import threading
 import time
@@ -77,6 +78,7 @@ class SkeletonFitterNode(MultiCameraNode):
             self.create_timer(0.1, self.request_next)   # gives up unanswered requests
         self.last_status = None
         self.working = {'preparing': False, 'fitting': False}   # each stage busy with a set (request_overlap)
+        self.fit_starts = False   # the set in (or handed to) the fit stage starts the fit (ready_to_request)
         self.workers = {name: threading.Thread(target=work, name=name, daemon=True)
                         for name, work in (('preparing', self.preparing_loop), ('fitting', self.fitting_loop))}
         self.diagnostics = NodeDiagnostics(self, self.state, [self.clock], self.workers, pools=[HYPOTHESES_POOL])
@@ -115,7 +117,8 @@ class SkeletonFitterNode(MultiCameraNode):
         if self.requests is None:
             return
         ready = ready_to_request(len(self.pending) or len(self.prepared),
-                                 (self.working['preparing'], self.working['fitting']), self.values['request_overlap'])
+                                 (self.working['preparing'], self.working['fitting']), self.values['request_overlap'],
+                                 self.fit_starts)
         requested = self.requests.next_request(time.monotonic(), ready=ready)
         if requested is not None:
             for (k, _), header in requested.messages.items():
@@ -134,6 +137,7 @@ class SkeletonFitterNode(MultiCameraNode):
                                      frame_set.messages[(number, 'labelled_contour')])
                             for number in self.cameras if (number, 'labelled_contour') in frame_set.messages}
                 prepared = self.fitting.prepare(frame_set.stamp_ns, features, frame_set.missing_groups)
+                self.fit_starts = self.fitting.starts_next
                 self.working['fitting'] = True   # handed on: never a moment in neither stage
                 self.prepared.put(prepared)
             except Exception as error:   # a bug must not stop the fitting: say it, drop the set, go on
@@ -148,6 +152,7 @@ class SkeletonFitterNode(MultiCameraNode):
             prepared = self.prepared.take(timeout=0.5)
             if prepared is None:
                 continue
+            self.fit_starts = self.fitting.starts_next
             self.working['fitting'] = True
             self.request_next()
             skips = self.pending.skipped + self.prepared.skipped + (self.requests.skipped if self.requests else 0)

@@ -55,6 +55,11 @@ class FrameSetFitter:
         self.cameras = list(cameras)
         self.clock = clock or StageClock()
 
+    @property
+    def starts_next(self):
+        """Whether the next frame set fitted starts the fit (SkeletonFitter.starts_next)."""
+        return self.fitter.starts_next
+
     def fit(self, stamp_ns, features, missing_cameras=(), skipped=0):
         """features: {camera number: (body.camera.Camera or None while its calibration is missing,
         SkinEllipseArray, LabelledContour)} of the cameras that sent this frame set; missing_cameras:
