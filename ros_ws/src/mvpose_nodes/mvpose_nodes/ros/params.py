@@ -224,9 +224,9 @@ SKELETON_FITTER = multi_camera_parameters(
               "cameras skip the frames it would skip (their follow_requests); a request unanswered for "
               "camera_timeout wall seconds is given up", read_only=True),
     Parameter('request_overlap', 1, "with request_frames: how many of the fitter's two stages (distance maps, "
-              "fit), counted from the last, may still be busy with earlier sets when it asks for the next (none while a "
-              "start is fitted, which takes several fits' time): 2 asks "
-              "as soon as a set is taken (the most sets fitted), 0 only once both are idle (the lowest latency "
+              "fit), counted from the last, may still be busy with earlier sets when it asks for the next (none "
+              "while a start is fitted, which takes several fits' time): 2 asks as soon as a set is taken (the "
+              "most sets fitted), 0 only once both are idle (the lowest latency "
               "when the cameras and the fitter share few cores), 1 while the last set is fitted "
               "(`./mvpose bench --rate 1.0` on 2 cores: 52 %, 42 % and 46-50 % of the sets fitted, 95th "
               "percentile latency 310, 155 and 200 ms)", range=(0, 2), read_only=True),
