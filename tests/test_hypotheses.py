@@ -4,7 +4,6 @@ walk and on a turn on the spot, where the direction of travel cannot help; with 
 the same starts stay wrong, so the checks can fail. Keypoints are exact and the silhouettes the studio's
 true masks: what is tested is the choice between labellings, not the features (those: the suite,
 test_commands.py)."""
-import functools
 import math
 from dataclasses import replace
 
@@ -15,6 +14,7 @@ from mvpose_nodes.app.reports.accuracy import swapped_pairs
 from mvpose_nodes.body.camera import studio_rig
 from mvpose_nodes.body.model import JOINT_NAMES
 from mvpose_nodes.fitting import fitter as fitter_module
+from mvpose_nodes.fitting import hypotheses as hypotheses_module
 from mvpose_nodes.fitting.fitter import SkeletonFitter
 from mvpose_nodes.fitting.hypotheses import (RELABELLINGS, START_LABELLINGS, combined, face_away, feet_outside,
                                              relabelled_joints)
@@ -176,7 +176,7 @@ def test_the_periodic_probe_rights_a_fit_turned_round(walk, monkeypatch, probed)
     arms exchanged instead leaves it turned round, so the check can fail."""
     monkeypatch.setattr(fitter_module, 'START_LABELLINGS', ())
     if probed:
-        monkeypatch.setattr(SkeletonFitter, 'probe', functools.partialmethod(SkeletonFitter.probe, labelling=probed))
+        monkeypatch.setattr(hypotheses_module, 'PERIODIC_PROBE', probed)
     _, swapped = swapped_after_wrong_start(walk, RELABELLINGS['turned round'], monkeypatch,
                                            FitterSettings(probe_period=2, crossing_distance=0.0))
     if probed is None:
@@ -252,7 +252,7 @@ def test_crossed_knees_standing_and_crossed_wrists_cost_more_and_are_probed(turn
         assert costs[0] == pytest.approx(costs[1] * (1 + share if judged else 1.0), rel=1e-12), costs
         probed = []
         monkeypatch.setattr(fitter, 'probe', lambda *args: probed.append(args[-1]))
-        monkeypatch.setattr(fitter_module, 'pair_crossing', lambda joints, limb: 0.1 if limb == pair else 0.0)
+        monkeypatch.setattr(hypotheses_module, 'pair_crossing', lambda joints, limb: 0.1 if limb == pair else 0.0)
         fitter.fit(3 / 25.0, views)
         monkeypatch.undo()
         monkeypatch.setattr(fitter_module, 'START_LABELLINGS', ())

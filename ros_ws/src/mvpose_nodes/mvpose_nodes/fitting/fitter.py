@@ -41,9 +41,9 @@ from mvpose_nodes.body.camera import intrinsics, look_at
 from mvpose_nodes.body.kinematics import BONES, bone_lengths, forward_kinematics, inverse_kinematics
 from mvpose_nodes.body.model import JOINT_INDEX, LABEL_TORSO, PARAMETER_INDEX, STAGE_NAMES
 from mvpose_nodes.fitting.compiled import MAP_LABELS, pack_frame
-from mvpose_nodes.fitting.hypotheses import (HYPOTHESES_POOL, PERIODIC_PROBE, RELABELLINGS, START_LABELLINGS, Track,
-                                             crossed_cost, crossing_judged, face_away, feet_outside, pair_crossing,
-                                             relabelled_joints, relabelled_stages, unexplained_share)
+from mvpose_nodes.fitting.hypotheses import (HYPOTHESES_POOL, RELABELLINGS, START_LABELLINGS, Track,
+                                             crossed_cost, due_probe, face_away, feet_outside, relabelled_joints,
+                                             relabelled_stages, unexplained_share)
 from mvpose_nodes.fitting.initialisation import (
     completed_joints, consistent_evidence, facing_right, labelled_joints, person_lengths, stature, tallest_measurements,
     triangulated_joints, upright)
@@ -174,21 +174,12 @@ class SkeletonFitter:
             self.legs_passed |= apart < settings.crossing_distance
             if not self.rivals:
                 self.since_probe += 1
-                # A stride, where continuity is least sure of the legs: probed as they close in again from
-                # crossing_distance or more (as they pass, or a short stride's widest) and once well apart; and
-                # standing with the feet together, whenever the knees cross (which the true knees do not).
-                leg = self.lengths['thigh'] + self.lengths['shin']
-                closing = settings.crossing_distance <= self.last_apart > apart
-                far = apart >= max(settings.crossing_distance, settings.stride_apart * leg)
-                crossed = pair_crossing(self.track.joints, 'knee') > 0 and crossing_judged(
-                    self.track.joints, self.track.limbs, settings)
-                if (self.legs_passed and (far or closing)) or crossed:
+                labelling = due_probe(self.track, self.lengths, apart, self.last_apart, self.legs_passed,
+                                      self.since_probe, settings)
+                if labelling == 'legs exchanged':
                     self.legs_passed = False
-                    self.probe(stamp, views, found, 'legs exchanged')
-                elif pair_crossing(self.track.joints, 'wrist') > 0:   # nor do the true wrists
-                    self.probe(stamp, views, found, 'arms exchanged')
-                elif self.since_probe >= settings.probe_period:
-                    self.probe(stamp, views, found)
+                if labelling is not None:
+                    self.probe(stamp, views, found, labelling)
             self.last_apart = apart
         # While a start's hypotheses are compared, the one that explains the views best so far is given out.
         track = min([self.track] + self.rivals, key=lambda t: t.cost) if self.starting else self.track
@@ -227,7 +218,7 @@ class SkeletonFitter:
             return [function(item) for item in items]
         return list(self.pool.map(function, items))
 
-    def probe(self, stamp, views, found, labelling=PERIODIC_PROBE):
+    def probe(self, stamp, views, found, labelling):
         """Follow `labelling` (a name of hypotheses.RELABELLINGS) beside the fit, from this frame set on."""
         self.track.cost = self.cost_of(self.track.parameters, views)
         self.rivals = [self.spawn(RELABELLINGS[labelling], stamp, views, found)]

@@ -163,6 +163,26 @@ def crossing_judged(joints, limbs, settings):
     return speed is not None and bool(apart < settings.crossing_distance and speed < settings.standing_speed)
 
 
+def due_probe(track, lengths, apart, last_apart, legs_passed, since_probe, settings):
+    """The labelling (a RELABELLINGS name) to follow beside the fit `track` (Track) from this frame set on, or
+    None. A stride, where continuity is least sure of the legs: the legs exchanged as the fit's ankles close in
+    again from crossing_distance or more (as they pass, or a short stride's widest; `apart`, `last_apart`: the
+    ankles' distance [m] now and at the last fit) and once they are stride_apart of the leg (`lengths`: the
+    person's bone lengths [m]) apart, if they have passed each other since the last legs' probe
+    (`legs_passed`); and standing with the feet together, whenever the knees cross (crossing_judged), which
+    the true knees do not. The arms exchanged whenever the wrists cross, which the true wrists do not. Else
+    PERIODIC_PROBE once `since_probe` frame sets have passed since the last probe (probe_period)."""
+    leg = lengths['thigh'] + lengths['shin']
+    closing = settings.crossing_distance <= last_apart > apart
+    far = apart >= max(settings.crossing_distance, settings.stride_apart * leg)
+    crossed = pair_crossing(track.joints, 'knee') > 0 and crossing_judged(track.joints, track.limbs, settings)
+    if (legs_passed and (far or closing)) or crossed:
+        return 'legs exchanged'
+    if pair_crossing(track.joints, 'wrist') > 0:
+        return 'arms exchanged'
+    return PERIODIC_PROBE if since_probe >= settings.probe_period else None
+
+
 def crossed_cost(cost, joints, limbs, settings):
     """A labelling's `cost` (SkeletonFitter.cost_of) raised by settings.crossed_cost_share, in full at a crossing
     of settings.crossed_by [m] and by as much less for less, for its pose's (joints (15, 3) [m]) knees crossed
