@@ -78,7 +78,9 @@ class SkeletonFitterNode(MultiCameraNode):
             self.create_timer(0.1, self.request_next)   # gives up unanswered requests
         self.last_status = None
         self.working = {'preparing': False, 'fitting': False}   # each stage busy with a set (request_overlap)
-        self.fit_starts = False   # the set in (or handed to) the fit stage starts the fit (ready_to_request)
+        # Whether the set in (or handed to) the fit stage starts the fit (ready_to_request): noted when the set is
+        # handed on, since the fitter's own starts_next turns False part-way through the start it names.
+        self.fit_starts = False
         self.workers = {name: threading.Thread(target=work, name=name, daemon=True)
                         for name, work in (('preparing', self.preparing_loop), ('fitting', self.fitting_loop))}
         self.diagnostics = NodeDiagnostics(self, self.state, [self.clock], self.workers, pools=[HYPOTHESES_POOL])
