@@ -91,10 +91,10 @@ def standing_body(root):
 def test_pairs_are_labelled_by_the_side_of_the_body_they_are_on():
     """label_across: of a triangulated pair, the point on the left shoulder's side is the left one, however
     far the two are apart front to back."""
+    joints, across, forward = standing_body('shoulder')
+    left_shoulder, right_shoulder = joints[JOINT_INDEX['left_shoulder']], joints[JOINT_INDEX['right_shoulder']]
     for name in ('knee', 'wrist'):
-        joints, across, forward = standing_body('shoulder')
-        left_root, right_root = joints[JOINT_INDEX['left_shoulder']], joints[JOINT_INDEX['right_shoulder']]
-        on_left, on_right = left_root + 0.4 * forward, right_root - 0.4 * forward   # a stride apart
+        on_left, on_right = left_shoulder + 0.4 * forward, right_shoulder - 0.4 * forward   # a stride apart
         found = {f'left_{name}': on_right, f'right_{name}': on_left, 'pelvis': joints[JOINT_INDEX['pelvis']]}
         label_across(found, joints)
         assert found[f'left_{name}'] is on_left and found[f'right_{name}'] is on_right
