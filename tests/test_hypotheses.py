@@ -18,6 +18,7 @@ from mvpose_nodes.fitting import hypotheses as hypotheses_module
 from mvpose_nodes.fitting.fitter import SkeletonFitter
 from mvpose_nodes.fitting.hypotheses import (RELABELLINGS, START_LABELLINGS, combined, face_away, feet_outside,
                                              relabelled_joints)
+from mvpose_nodes.fitting.initialisation import ellipse_top, face_tells, hair_gap
 from mvpose_nodes.fitting.limb_sides import mirrored_joints
 from mvpose_nodes.fitting.settings import FitterSettings
 
@@ -304,6 +305,34 @@ def test_the_face_the_views_see_weighs_on_front_and_back(standing, monkeypatch):
     for share, turned in ((10.0, True), (FitterSettings().face_cost_share, False), (0.0, False)):
         _, swapped = swapped_after_wrong_start(face_behind, (), monkeypatch, FitterSettings(face_cost_share=share))
         assert all(swapped[WITHIN:]) if turned else not any(swapped[WITHIN:]), (share, swapped)
+
+
+def test_the_face_is_not_asked_of_hair_read_as_skin(standing, monkeypatch):
+    """A face seen on the back, weighed ten times its cost, turns the fit round (above) where the views show
+    hair that is not skin above the face (its skin starting 0.2 of the head's height below the head's top:
+    View.hair_gap). Where the skin reaches the top of the head in every view (hair_gap 0, as blond or light
+    brown hair read as skin gives it, and then reads as a face from behind too), the face is not asked
+    (initialisation.face_tells) and the fit faces the right way WITHIN frame sets after a wrong start."""
+    for gap, turned in ((0.2, True), (0.0, False)):
+        face_behind = [(truth, [replace(view, frontness=1.0 - view.frontness, hair_gap=gap) for view in views])
+                       for truth, views in standing]
+        _, swapped = swapped_after_wrong_start(face_behind, (), monkeypatch, FitterSettings(face_cost_share=10.0))
+        assert all(swapped[WITHIN:]) if turned else not any(swapped[WITHIN:]), (gap, swapped)
+
+
+def test_the_hair_gap_is_where_the_face_skin_begins_below_the_head_top():
+    """ellipse_top: an upright ellipse's top is its centre less the semi-major axis, a level one's less the
+    semi-minor, one at 45° less √((a² + b²) / 2); hair_gap: the face ellipse's top below the head keypoint, as a
+    share of the head keypoint's height above the neck keypoint, None without either; face_tells: the
+    median of the person's gaps so far against the threshold, and true before any is measured."""
+    assert ellipse_top(100.0, 30.0, 20.0, math.pi / 2) == pytest.approx(70.0)
+    assert ellipse_top(100.0, 30.0, 20.0, 0.0) == pytest.approx(80.0)
+    assert ellipse_top(100.0, 30.0, 20.0, math.pi / 4) == pytest.approx(100.0 - math.sqrt((30.0 ** 2 + 20.0 ** 2) / 2))
+    keypoints = {'head': (50.0, 200.0, 0.8), 'neck': (52.0, 300.0, 0.8)}
+    assert hair_gap(215.0, keypoints) == pytest.approx(0.15) and hair_gap(200.0, keypoints) == 0.0
+    assert hair_gap(None, keypoints) is None and hair_gap(215.0, {'head': keypoints['head']}) is None
+    assert hair_gap(215.0, {'head': (50.0, 200.0, 0.8), 'neck': (50.0, 200.5, 0.8)}) is None   # no head to measure
+    assert face_tells([], 0.04) and face_tells([0.0, 0.1, 0.2], 0.04) and not face_tells([0.0, 0.01, 0.2], 0.04)
 
 
 def test_the_face_charges_a_pose_as_far_as_its_hips_face_away(walk):

@@ -42,6 +42,8 @@ def fit_bag(args):
     from mvpose_nodes.ros.camera_bag import GROUND_TRUTH_TOPIC, SKELETON_TOPIC, STREAM_QOS, cameras_in, frame_sets
     from mvpose_nodes.app.features import count_images, make_extractor
     from mvpose_nodes.fitting.fitter import SkeletonFitter, view_from_features
+    from mvpose_nodes.fitting.initialisation import ellipse_top
+    from mvpose_nodes.vision.features import ROLE_FACE
     from mvpose_nodes.app.progress import Progress
     from mvpose_nodes.ros.conversions import skeleton_message, stage_messages
 
@@ -65,8 +67,11 @@ def fit_bag(args):
                 features = extractors[number](frame_set.images[number])
                 if features.person:
                     skin = [(*e.center, e.area) for e in features.ellipses]
+                    faces = [ellipse_top(e.center[1], e.semi_major, e.semi_minor, e.angle)
+                             for e in features.ellipses if e.role == ROLE_FACE]
                     views.append(view_from_features(frame_set.cameras[number], features.visible_keypoints(),
-                                                    features.contour, features.frontness, skin))
+                                                    features.contour, features.frontness, skin,
+                                                    faces[0] if faces else None))
             try:
                 if profiler:
                     profiler.enable()

@@ -33,7 +33,7 @@ better. Every tuning constant is a field of settings.FitterSettings.
 import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -45,8 +45,8 @@ from mvpose_nodes.fitting.hypotheses import (HYPOTHESES_POOL, RELABELLINGS, STAR
                                              crossed_cost, due_probe, face_away, feet_outside, relabelled_joints,
                                              relabelled_stages, unexplained_share)
 from mvpose_nodes.fitting.initialisation import (
-    completed_joints, consistent_evidence, facing_right, labelled_joints, person_lengths, stature, tallest_measurements,
-    triangulated_joints, upright)
+    completed_joints, consistent_evidence, face_tells, facing_right, hair_gap, labelled_joints, person_lengths, stature,
+    tallest_measurements, triangulated_joints, upright)
 from mvpose_nodes.fitting.limb_sides import LimbTracks, exchanged_pairs, oriented_view
 from mvpose_nodes.fitting.limb_starts import limb_start_joints
 from mvpose_nodes.fitting.objective import EDGE_PX, MapArena, boundary_distances, map_floats, outline_of
@@ -75,13 +75,15 @@ class View:
     """One camera's evidence for one frame: its Camera, the boundary distance maps of its labelled
     contour (objective.BoundaryDistances, or None), its 2D keypoints {name: (x, y, confidence)}, how
     much of the face it sees (features.Features.frontness; None if unknown), its outline
-    (objective.Outline, or None) and its skin regions (N, 3): centre x, y [px] and area [px²] (or None)."""
+    (objective.Outline, or None), its skin regions (N, 3): centre x, y [px] and area [px²] (or None), and where
+    the face's skin begins below the top of the head (initialisation.hair_gap; None if unknown)."""
     camera: object
     distances: object
     keypoints: dict
     frontness: float = None
     outline: object = None
     skin: np.ndarray = None
+    hair_gap: float = None
 
 
 @dataclass
@@ -126,6 +128,7 @@ class SkeletonFitter:
         self.legs_passed = False  # the fit's ankles have passed each other since the last probe of the legs
         self.last_apart = 0.0     # [m] how far apart the fit's ankles were in the last frame set followed
         self.last_found = None    # the last frame set's triangulated joints {name: (3,) [m]} (or None)
+        self.hair_gaps = []       # the person's initialisation.hair_gap in every view so far (face_tells)
 
     @property
     def starts_next(self):
@@ -151,8 +154,11 @@ class SkeletonFitter:
             # Time went back: another recording (a bag played again, or someone else's), measured afresh,
             # so that the same bag gives the same skeletons; nor is its last pose this recording's.
             self.lengths, self.stages, self.measurements, self.track, self.rivals = None, None, [], None, []
-            self.given, self.last_found = None, None
+            self.given, self.last_found, self.hair_gaps = None, None, []
         self.last_stamp = stamp
+        self.hair_gaps += [view.hair_gap for view in views if view.hair_gap is not None]
+        if not face_tells(self.hair_gaps, settings.hair_gap):   # hair read as skin: no face to see
+            views = [replace(view, frontness=None) for view in views]
         found = triangulated_joints(views, settings)
         self.face_right = None
         if found is not None:
@@ -445,11 +451,11 @@ def pelvis_displacement(before, after):
     return after['pelvis'] - before['pelvis']
 
 
-def view_from_features(camera, keypoints, contour, frontness=None, skin=None, arena=None):
+def view_from_features(camera, keypoints, contour, frontness=None, skin=None, face_top=None, arena=None):
     """A View of one camera from its features: keypoints {name: (x, y, confidence)} (the visible ones),
-    its ContourLabels (or None), its frontness and its skin regions [(x, y, area)] (the skin ellipses'
-    centres [px] and areas [px²]); its distance maps in `arena` (objective.MapArena, sized by
-    frame_set_arena) if given."""
+    its ContourLabels (or None), its frontness, its skin regions [(x, y, area)] (the skin ellipses'
+    centres [px] and areas [px²]) and its face ellipse's topmost row [px] (initialisation.ellipse_top; None
+    without one); its distance maps in `arena` (objective.MapArena, sized by frame_set_arena) if given."""
     distances = outline = None
     if contour is not None and len(contour.points):
         distances = boundary_distances(contour, (camera.width, camera.height), MAP_LABELS, arena=arena)
@@ -460,7 +466,7 @@ def view_from_features(camera, keypoints, contour, frontness=None, skin=None, ar
                 x, y, confidence = keypoints['root']
                 keypoints['root'] = (x, y, confidence * CUT_ROOT_CONFIDENCE)
     skin = None if skin is None else np.asarray(skin, float).reshape(-1, 3)
-    return View(camera, distances, keypoints, frontness, outline, skin)
+    return View(camera, distances, keypoints, frontness, outline, skin, hair_gap(face_top, keypoints))
 
 
 def cut_off(contour_points, camera):

@@ -10,7 +10,8 @@ twist limits: turned round 49 %). The limits on the thighs' adduction and the up
 the body do the same for legs or arms exchanged, which cross the body's middle. For a body standing
 straight, the feet and the face tell front from back (SkeletonFitter.cost_of): the feet point the way
 the hips face (feet_outside), and the face is where the views see skin on the head (weaker: hair of
-skin's colour reads as a face).
+skin's colour reads as a face, so the face is not asked of a person whose skin reaches the top of the head:
+initialisation.face_tells).
 
 So the fitter follows hypotheses (Track): at a start, the fit and each other labelling of it (RELABELLINGS
 and their combinations) are each tracked for hypothesis_frames frame sets and the one whose fits cost the

@@ -162,6 +162,33 @@ def torso_below_the_head(views, found, settings):
     return lowered, dict(found, pelvis=placed['root'], neck=placed['neck'])
 
 
+def ellipse_top(center_y, semi_major, semi_minor, angle):
+    """[px] The topmost row of an ellipse (image rows down; angle [rad] of the major axis from +x towards +y)."""
+    return center_y - float(np.hypot(semi_major * np.sin(angle), semi_minor * np.cos(angle)))
+
+
+def hair_gap(face_top, keypoints):
+    """How far below the head keypoint (the silhouette's top) the face's skin begins, as a share of the head
+    keypoint's height above the neck keypoint: face_top [px] the face ellipse's topmost row (ellipse_top),
+    keypoints {name: (x, y, confidence)} [px]. None without a face ellipse or either keypoint. About 0 when
+    the hair reads as skin (the skin reaches the top of the head), 0.03–0.4 per person under hair that does not
+    (issue 13; docs/method.md, session 47)."""
+    if face_top is None or 'head' not in keypoints or 'neck' not in keypoints:
+        return None
+    height = keypoints['neck'][1] - keypoints['head'][1]
+    return (face_top - keypoints['head'][1]) / height if height > 1.0 else None
+
+
+def face_tells(hair_gaps, min_hair_gap):
+    """Whether the skin on the head can tell a face from the back of a head: the median of the person's
+    hair_gap over the views so far (a list) at least min_hair_gap (FitterSettings.hair_gap), or none measured
+    yet. Hair read as skin (blond or light brown in the suite's studio, or a bald head) covers the head from
+    every side: the views' skin shares then rank front against back no better than chance (front-against-back
+    AUC over the views of the 48 tuning cases of seeds 13-16: blond 0.44, brown 0.57; black 0.62, dark 0.82,
+    auburn 0.88, grey 0.91)."""
+    return not hair_gaps or float(np.median(hair_gaps)) >= min_hair_gap
+
+
 def facing_right(views, joints, face_evidence):
     """The person's right (unit, horizontal) from where the face is seen: the cameras that see more skin
     on the head than the others (Features.frontness) are in front of the person (paper 000's views cannot

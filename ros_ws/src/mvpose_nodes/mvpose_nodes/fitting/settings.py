@@ -73,6 +73,11 @@ class FitterSettings:
     face_evidence: float = setting(
         0.2, "the sum over the views of (frontness − the views' mean) × the unit vector towards the camera "
              'needed to trust the face (initialisation.facing_right)', 0.0, 10.0)
+    hair_gap: float = setting(
+        0.04, "[share of the head's height] the face is asked only if the skin on the head starts at least this far "
+              'below its top (the median over the views so far; initialisation.face_tells): hair read as skin '
+              'reaches the top (per person 0.00-0.04 for blond and brown hair in the suite, 0.03-0.40 for the '
+              'others)', 0.0, 1.0)
     # Left and right, front and back (fitting/limb_sides.py, fitting/hypotheses.py).
     walking_baseline: float = setting(
         0.4, "[s] how long fits are remembered: the last two give each pair's predicted place and the pelvis's "

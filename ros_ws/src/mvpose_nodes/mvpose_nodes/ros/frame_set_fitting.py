@@ -12,12 +12,12 @@ any camera sees the person, and nothing if none does.
 """
 from dataclasses import dataclass
 
-from mvpose_msgs.msg import LabelledContour, Skeleton
+from mvpose_msgs.msg import LabelledContour, Skeleton, SkinEllipse
 
 from mvpose_nodes.body.kinematics import bone_lengths, forward_kinematics
 from mvpose_nodes.body.model import PARAMETER_NAMES
 from mvpose_nodes.fitting.fitter import SkeletonFitter, frame_set_arena, view_from_features
-from mvpose_nodes.fitting.initialisation import TEMPLATE_HEIGHT, guessed_parameters
+from mvpose_nodes.fitting.initialisation import TEMPLATE_HEIGHT, ellipse_top, guessed_parameters
 from mvpose_nodes.ros.conversions import (contour_from_message, keypoints_from_messages, skeleton_message,
                                           stage_messages)
 from mvpose_nodes.ros.diagnostics import StageClock
@@ -85,10 +85,12 @@ class FrameSetFitter:
                     problems.append((f'contour {number}', f'/cam{number}/labelled_contour: {error}; dropped'))
                     continue
                 skin = [(e.center_x, e.center_y, e.area) for e in ellipses.ellipses]
+                faces = [ellipse_top(e.center_y, e.semi_major, e.semi_minor, e.angle)
+                         for e in ellipses.ellipses if e.role == SkinEllipse.ROLE_FACE]
                 converted.append((camera, keypoints_from_messages(ellipses, contour), labels,
-                                  ellipses.face_visibility, skin))
+                                  ellipses.face_visibility, skin, faces[0] if faces else None))
         with self.clock('distance maps'):
-            arena = frame_set_arena([labels for _, _, labels, _, _ in converted])
+            arena = frame_set_arena([labels for _, _, labels, _, _, _ in converted])
             views = [view_from_features(*parts, arena=arena) for parts in converted]
         return PreparedSet(stamp_ns, views, problems, tuple(missing_cameras))
 
