@@ -68,6 +68,7 @@ TORSO_START_YAWS = tuple(np.pi * eighth / 4 for eighth in (-2, -1, 1, 2))
 # of its confidence: without it, a person cut off in every view (close to the cameras) has no start at all.
 SILHOUETTE_KEYPOINTS = ('left_knee', 'right_knee', 'left_ankle', 'right_ankle')
 CUT_ROOT_CONFIDENCE = 0.2
+HAIR_VIEWS = 500   # the person's hair_gap is measured on this many views (400 in a 50-frame case of 8 cameras), no more
 
 
 @dataclass
@@ -156,7 +157,8 @@ class SkeletonFitter:
             self.lengths, self.stages, self.measurements, self.track, self.rivals = None, None, [], None, []
             self.given, self.last_found, self.hair_gaps = None, None, []
         self.last_stamp = stamp
-        self.hair_gaps += [view.hair_gap for view in views if view.hair_gap is not None]
+        if len(self.hair_gaps) < HAIR_VIEWS:   # a person's hair does not change: a live feed's list stays short
+            self.hair_gaps += [view.hair_gap for view in views if view.hair_gap is not None]
         if not face_tells(self.hair_gaps, settings.hair_gap):   # hair read as skin: no face to see
             views = [replace(view, frontness=None) for view in views]
         found = triangulated_joints(views, settings)
