@@ -113,6 +113,9 @@ def test_shortest_path_avoids_blocked_vertices():
     assert np.isclose(path_length(points, around), 130 * DIAGONAL)
     assert shortest_path(graph, 0, 30, blocked=[15, 100]) == []
     assert shortest_path(graph, 7, 7) == [7]
+    # The blocked vertices' edges are restored: the graph is the contour's again, and a path free again.
+    assert (graph != contour_graph(points)).nnz == 0
+    assert shortest_path(graph, 0, 30) == list(range(31))
 
 
 def test_label_contour_landmarks(labelled):

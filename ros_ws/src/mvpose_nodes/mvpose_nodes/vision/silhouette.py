@@ -148,7 +148,9 @@ def clean_mask(foreground, min_area=MIN_PERSON_AREA, opening=OPENING_PX, closing
     outside = holes[0, 0]
     small = [i for i in range(1, len(hole_areas)) if i != outside
              and hole_areas[i] <= max_hole_fraction * areas[largest]]
-    filled = blob.astype(bool) | np.isin(holes[1:-1, 1:-1], small)
+    filled = blob.astype(bool)
+    if small:   # most silhouettes have none: no pass over the box
+        filled |= np.isin(holes[1:-1, 1:-1], small)
     person = np.zeros(foreground.shape, bool)
     person[y:y + h, x:x + w] = filled
     return person

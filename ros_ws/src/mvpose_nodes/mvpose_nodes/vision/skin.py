@@ -198,7 +198,8 @@ def detect_skin(model, rgb, threshold=0.0, region=None, min_area=30, opening=1, 
         labels, areas = components(skin)
         large = areas >= min_area
         large[0] = False  # label 0 is the background
-        skin = large[labels]
+        if not large[1:].all():   # else no pass over the window: nothing to drop
+            skin = large[labels]
     mask = np.zeros((height, width), bool)
     mask[window] = skin
     return mask
@@ -258,7 +259,8 @@ def surround_contrast(rgb, skin, region, silhouette, band):
     crop = rgb[window]
 
     def mean_chroma(mask):
-        return cv2.cvtColor(crop[mask].reshape(-1, 1, 3), cv2.COLOR_RGB2LAB).reshape(-1, 3)[:, 1:].mean(axis=0)
+        # The pixels as one row: cvtColor's cost per row dwarfs a pixel's (a column of them took 7 times as long).
+        return cv2.cvtColor(crop[mask].reshape(1, -1, 3), cv2.COLOR_RGB2LAB).reshape(-1, 3)[:, 1:].mean(axis=0)
     return float(np.linalg.norm(mean_chroma(inside) - mean_chroma(around)))
 
 
