@@ -18,9 +18,10 @@ from mvpose_nodes.fitting import hypotheses as hypotheses_module
 from mvpose_nodes.fitting.fitter import SkeletonFitter
 from mvpose_nodes.fitting.hypotheses import (RELABELLINGS, START_LABELLINGS, combined, face_away, feet_outside,
                                              relabelled_joints)
-from mvpose_nodes.fitting.initialisation import ellipse_top, face_tells, hair_gap
+from mvpose_nodes.fitting.initialisation import face_tells, hair_gap
 from mvpose_nodes.fitting.limb_sides import mirrored_joints
 from mvpose_nodes.fitting.settings import FitterSettings
+from mvpose_nodes.vision.features import ellipse_top
 
 from common import rendered_views
 

@@ -42,8 +42,7 @@ def fit_bag(args):
     from mvpose_nodes.ros.camera_bag import GROUND_TRUTH_TOPIC, SKELETON_TOPIC, STREAM_QOS, cameras_in, frame_sets
     from mvpose_nodes.app.features import count_images, make_extractor
     from mvpose_nodes.fitting.fitter import SkeletonFitter, view_from_features
-    from mvpose_nodes.fitting.initialisation import ellipse_top
-    from mvpose_nodes.vision.features import ROLE_FACE
+    from mvpose_nodes.vision.features import ROLE_FACE, ellipse_top
     from mvpose_nodes.app.progress import Progress
     from mvpose_nodes.ros.conversions import skeleton_message, stage_messages
 

@@ -456,7 +456,7 @@ def pelvis_displacement(before, after):
 def view_from_features(camera, keypoints, contour, frontness=None, skin=None, face_top=None, arena=None):
     """A View of one camera from its features: keypoints {name: (x, y, confidence)} (the visible ones),
     its ContourLabels (or None), its frontness, its skin regions [(x, y, area)] (the skin ellipses'
-    centres [px] and areas [px²]) and its face ellipse's topmost row [px] (initialisation.ellipse_top; None
+    centres [px] and areas [px²]) and its face ellipse's topmost row [px] (vision.features.ellipse_top; None
     without one); its distance maps in `arena` (objective.MapArena, sized by frame_set_arena) if given."""
     distances = outline = None
     if contour is not None and len(contour.points):

@@ -162,17 +162,12 @@ def torso_below_the_head(views, found, settings):
     return lowered, dict(found, pelvis=placed['root'], neck=placed['neck'])
 
 
-def ellipse_top(center_y, semi_major, semi_minor, angle):
-    """[px] The topmost row of an ellipse (image rows down; angle [rad] of the major axis from +x towards +y)."""
-    return center_y - float(np.hypot(semi_major * np.sin(angle), semi_minor * np.cos(angle)))
-
-
 def hair_gap(face_top, keypoints):
     """How far below the head keypoint (the silhouette's top) the face's skin begins, as a share of the head
-    keypoint's height above the neck keypoint: face_top [px] the face ellipse's topmost row (ellipse_top),
-    keypoints {name: (x, y, confidence)} [px]. None without a face ellipse or either keypoint. About 0 when
-    the hair reads as skin (the skin reaches the top of the head), 0.03–0.4 per person under hair that does not
-    (issue 13; docs/method.md, session 47)."""
+    keypoint's height above the neck keypoint: face_top [px] the face ellipse's topmost row
+    (vision.features.ellipse_top), keypoints {name: (x, y, confidence)} [px]. None without a face ellipse or
+    either keypoint. About 0 when the hair reads as skin (the skin reaches the top of the head), 0.03–0.4 per
+    person under hair that does not (issue 13; docs/method.md, session 47)."""
     if face_top is None or 'head' not in keypoints or 'neck' not in keypoints:
         return None
     height = keypoints['neck'][1] - keypoints['head'][1]

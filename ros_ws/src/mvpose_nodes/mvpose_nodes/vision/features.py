@@ -122,6 +122,11 @@ def ellipse_of(points):
     return (cx, cy), width / 2, height / 2, angle
 
 
+def ellipse_top(center_y, semi_major, semi_minor, angle):
+    """[px] The topmost row of an ellipse (image rows down; angle [rad] of the major axis from +x towards +y)."""
+    return center_y - float(np.hypot(semi_major * np.sin(angle), semi_minor * np.cos(angle)))
+
+
 class FeatureExtractor:
     """The per-image pipeline for one camera: `extractor(rgb) -> Features`."""
 
