@@ -284,6 +284,43 @@ def test_the_fitter_requests_the_newest_announced_frame_set_one_at_a_time(ros_co
     assert code == 0, err
 
 
+def test_a_camera_announcing_late_is_waited_for_while_others_announce(rendered_features, background, ros_context):
+    """The idle flush (camera_timeout without input: a bag's end) is for input that has stopped. Between two
+    frames of a slow playback, camera 3 announcing its next image counts as input, so camera 5's announcement
+    of the same image 0.7 s later (within camera_timeout of camera 3's, but more than camera_timeout after
+    the last features) joins the set: both cameras are asked for it, not each alone."""
+    from std_msgs.msg import Header
+    fitter = background('run', 'skeleton_fitter', '--ros-args', '-p', f'cameras:={list(CAMERAS)}',
+                        '-p', 'camera_timeout:=1.0')
+    node, _, publishers = feeding_node('late_announcer')
+    requested = {k: [] for k in CAMERAS}
+    for k in CAMERAS:
+        node.create_subscription(Header, f'/cam{k}/frame_request', requested[k].append, 10)
+    announcers = {k: Publisher(node, Header, f'/cam{k}/frame_available', 10) for k in CAMERAS}
+    features_stamp, announced_stamp = frame_stamp_ns(60), frame_stamp_ns(61)
+    try:
+        for publisher in [*publishers.values(), *announcers.values()]:
+            publisher.wait_for_subscribers(timeout=30)
+        spin_until(node, lambda: all(node.count_publishers(f'/cam{k}/frame_request') for k in CAMERAS), 60,
+                   "the fitter's frame_request publishers")
+        for k, (_, features) in rendered_features.items():   # input has come: the idle flush is armed
+            header = set_stamp(Image().header, features_stamp, optical_frame(k))
+            for topic, message in zip(FEATURES, feature_messages(features, header)):
+                publishers[(k, topic)].publish(message)
+        spin_for(node, 0.6)
+        announcers[3].publish(set_stamp(Header(), announced_stamp, optical_frame(3)))
+        spin_for(node, 0.7)   # 1.3 s after the features
+        announcers[5].publish(set_stamp(Header(), announced_stamp, optical_frame(5)))
+        spin_until(node, lambda: any(requested.values()), 30, 'a request')
+        spin_for(node, 1.5)   # a split set's second request; unanswered, a request is also asked once more
+    finally:
+        node.destroy_node()
+    asked = {k: [stamp_ns(h) for h in requested[k]] for k in CAMERAS}
+    assert asked[3] and asked[3] == asked[5] and set(asked[3]) == {announced_stamp}, asked
+    code, _, err = fitter.interrupt()
+    assert code == 0, err
+
+
 ODD_SEGMENT = 8   # frame sets per fault in the test below
 ODD_PERIOD = 0.4  # [s] between its frame sets: the fitter keeps up, also where a fault restarts it (a start fits
 #                   every labelling of the body for hypothesis_frames frame sets: fitting/hypotheses.py)

@@ -99,6 +99,9 @@ class SkeletonFitterNode(MultiCameraNode):
         self.pending.put(frame_set)
 
     def on_announcement(self, camera, header):
+        # Input too: an image the cameras are still announcing (one before another) is not the end of the input,
+        # which the idle flush would cut short, asking some cameras alone for it.
+        self.last_input = time.monotonic()
         with self.clock('sync'):
             for announced in self.announcements.add((camera, 'frame_available'), stamp_ns(header), header):
                 self.requests.announce(announced)
