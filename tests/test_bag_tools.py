@@ -164,9 +164,13 @@ def test_plain_play_loses_nothing_to_a_subscriber_already_running(recorded_bag, 
 def test_play_says_how_many_messages_nobody_received(recorded_bag, background, ros_context):
     """Issue 15: messages played before a topic's first subscriber matched are counted and named at the
     end, not lost silently; the subscriber gets all the others."""
-    player = background('bag', 'play', recorded_bag, '--topics', SKELETON_TOPIC, '--rate', 0.02)  # 2 s apart
-    player.wait_for_stderr_line('[play] playing')   # the first skeleton goes out now, to nobody
-    time.sleep(0.5)
+    rate = 0.02   # the skeletons 2 s apart
+    with AnyReader([recorded_bag]) as reader:   # the bag starts with its CameraInfo, received before them
+        first = min(t for c, t, _ in reader.messages() if c.topic == SKELETON_TOPIC)
+        lead = (first - reader.start_time) / 1e9 / rate
+    player = background('bag', 'play', recorded_bag, '--topics', SKELETON_TOPIC, '--rate', rate)
+    player.wait_for_stderr_line('[play] playing')
+    time.sleep(lead + 0.5)   # the first skeleton has gone out, to nobody
     echo = background('topic', 'echo', SKELETON_TOPIC, SKELETON_TYPE, '--field', 'status_message')
     code, _, err = player.finish(timeout=60)
     assert code == 0, err
