@@ -243,7 +243,7 @@ def rendered_views(motion, cameras, frames):
     each view with the keypoints projected from the truth (those inside the image) and the outline of the
     studio's true mask."""
     from mvpose_nodes.body.model import JOINT_NAMES
-    from mvpose_nodes.fitting.fitter import View
+    from mvpose_nodes.fitting.views import View
     from mvpose_nodes.fitting.objective import outline_of
     from mvpose_nodes.fitting.stage_search import KEYPOINT_JOINT
     from mvpose_nodes.studio import scene

@@ -13,7 +13,7 @@ from mvpose_nodes.body.kinematics import bone_lengths, forward_kinematics, inver
 from mvpose_nodes.body.model import STAGE_NAMES
 from mvpose_nodes.fitting.compiled import pack_frame
 from mvpose_nodes.fitting.compiled_kinematics import bone_length_array, forward_joints
-from mvpose_nodes.fitting.fitter import frame_set_arena, view_from_features
+from mvpose_nodes.fitting.views import frame_set_arena, view_from_features
 from mvpose_nodes.fitting.settings import FitterSettings
 from mvpose_nodes.fitting.stage_search import STAGE_PARAMETERS, StageSearch, stage_indices
 from mvpose_nodes.ros.params import default_skin_model_path

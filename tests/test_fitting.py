@@ -8,7 +8,8 @@ from common import rendered_views
 from mvpose_nodes.body.model import JOINT_NAMES, PARAMETER_NAMES
 from mvpose_nodes.body.camera import studio_rig
 from mvpose_nodes.body.kinematics import bone_lengths, forward_kinematics, lengths_of
-from mvpose_nodes.fitting.fitter import SkeletonFitter, View
+from mvpose_nodes.fitting.fitter import SkeletonFitter
+from mvpose_nodes.fitting.views import View
 from mvpose_nodes.fitting.initialisation import stature, torso_below_the_head, upright
 from mvpose_nodes.fitting.settings import FitterSettings
 from mvpose_nodes.fitting.stage_search import KEYPOINT_JOINT
@@ -383,11 +384,11 @@ def upright_joints(joints):
 
 
 def test_a_person_the_image_cuts_off_keeps_only_what_the_cut_does_not_spoil():
-    """Where the image's edge cuts the silhouette (fitter.cut_off), its outline along the edge is not the
+    """Where the image's edge cuts the silhouette (views.edge_share), its outline along the edge is not the
     person's (objective.outline_of leaves it out), knees and ankles read off its shape are left out, and
     the root (its centroid), shifted but the only start, is kept at CUT_ROOT_CONFIDENCE."""
     from mvpose_nodes.body.camera import intrinsics, look_at
-    from mvpose_nodes.fitting.fitter import CUT_ROOT_CONFIDENCE, view_from_features
+    from mvpose_nodes.fitting.views import CUT_ROOT_CONFIDENCE, view_from_features
     from mvpose_nodes.fitting.objective import EDGE_PX
     from mvpose_nodes.vision.contour import SIDE_A, ContourLabels
     camera = look_at(1, (0.0, -3.0, 1.0), (0.0, 0.0, 1.0), intrinsics(100.0, 100, 100), 100, 100)
@@ -406,6 +407,34 @@ def test_a_person_the_image_cuts_off_keeps_only_what_the_cut_does_not_spoil():
     assert (whole.outline.points[:, 1] >= 90).any() and (cut.outline.points[:, 1] < 100 - EDGE_PX).all()
 
 
+def test_a_view_mostly_cut_off_is_left_out_where_three_others_see_the_person(cmu_walk):
+    """A view with over cut_share of its contour on the image's edge (views.edge_share) is left out of a frame
+    set in which at least three other views are cut less (views.whole_views): the fit is the three views'
+    to the bit. With only two others, or with cut_share 1 (never), it is fitted too."""
+    from dataclasses import replace
+    from mvpose_nodes.fitting.views import whole_views
+    motion = cmu_walk.placed()
+    cut_share = FitterSettings().cut_share
+
+    def frame_views(cameras, frame, cut_camera=None):
+        views = exact_views(studio_rig(cameras=cameras), motion.joints[frame])
+        return [replace(v, edge_share=2 * cut_share) if v.camera.number == cut_camera else v for v in views]
+
+    def fitted(cameras, cut_camera=None, settings=None):
+        """The fitted joints (3, 15, 3) [m] of three frame sets."""
+        fitter = SkeletonFitter(settings)
+        return np.array([fitter.fit(frame / 25.0, frame_views(cameras, frame, cut_camera)).joints for frame in range(3)])
+
+    four = frame_views([3, 5, 7, 1], 0, cut_camera=1)
+    assert whole_views(four, cut_share) == four[:3]
+    assert whole_views(four[1:], cut_share) == four[1:]   # two views cut less: all kept
+    at_the_share = [replace(v, edge_share=cut_share) for v in four[:3]] + four[3:]
+    assert whole_views(at_the_share, cut_share) == at_the_share[:3]
+    three = fitted([3, 5, 7])
+    assert np.array_equal(fitted([3, 5, 7, 1], cut_camera=1), three)
+    assert not np.array_equal(fitted([3, 5, 7, 1], cut_camera=1, settings=FitterSettings(cut_share=1.0)), three)
+
+
 def test_a_cut_off_views_legs_are_oriented_by_where_the_poses_legs_lie():
     """The image cutting the legs off leaves the knees and ankles out (above), but the contour was labelled by
     them, from a front or back the face only guessed: a view seen from the back labelled as if from the front
@@ -415,7 +444,7 @@ def test_a_cut_off_views_legs_are_oriented_by_where_the_poses_legs_lie():
     thighs and shins lie on; a pose whose legs lie on their own labels keeps them."""
     from mvpose_nodes.body.camera import intrinsics, look_at
     from mvpose_nodes.body.model import JOINT_INDEX, LABEL_LEFT_LEG, LABEL_RIGHT_LEG
-    from mvpose_nodes.fitting.fitter import view_from_features
+    from mvpose_nodes.fitting.views import view_from_features
     from mvpose_nodes.fitting.limb_sides import mirrored_joints, oriented_view
     from mvpose_nodes.vision.contour import SIDE_A, SIDE_B, ContourLabels
     size = 400

@@ -41,7 +41,8 @@ def fit_bag(args):
     from mvpose_nodes.body.model import PARAMETER_NAMES
     from mvpose_nodes.ros.camera_bag import GROUND_TRUTH_TOPIC, SKELETON_TOPIC, STREAM_QOS, cameras_in, frame_sets
     from mvpose_nodes.app.features import count_images, make_extractor
-    from mvpose_nodes.fitting.fitter import SkeletonFitter, view_from_features
+    from mvpose_nodes.fitting.fitter import SkeletonFitter
+    from mvpose_nodes.fitting.views import view_from_features
     from mvpose_nodes.vision.features import ROLE_FACE, ellipse_top
     from mvpose_nodes.app.progress import Progress
     from mvpose_nodes.ros.conversions import skeleton_message, stage_messages

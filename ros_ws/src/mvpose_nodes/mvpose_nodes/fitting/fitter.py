@@ -40,18 +40,18 @@ import numpy as np
 from mvpose_nodes.body.camera import intrinsics, look_at
 from mvpose_nodes.body.kinematics import BONES, bone_lengths, forward_kinematics, inverse_kinematics
 from mvpose_nodes.body.model import JOINT_INDEX, LABEL_TORSO, PARAMETER_INDEX, STAGE_NAMES
-from mvpose_nodes.fitting.compiled import MAP_LABELS, pack_frame
+from mvpose_nodes.fitting.compiled import pack_frame
 from mvpose_nodes.fitting.hypotheses import (HYPOTHESES_POOL, RELABELLINGS, START_LABELLINGS, Track,
                                              crossed_cost, due_probe, face_away, feet_outside, relabelled_joints,
                                              relabelled_stages, unexplained_share)
 from mvpose_nodes.fitting.initialisation import (
-    completed_joints, consistent_evidence, face_tells, facing_right, hair_gap, labelled_joints, person_lengths, stature,
+    completed_joints, consistent_evidence, face_tells, facing_right, labelled_joints, person_lengths, stature,
     tallest_measurements, triangulated_joints, upright)
 from mvpose_nodes.fitting.limb_sides import LimbTracks, exchanged_pairs, oriented_view
 from mvpose_nodes.fitting.limb_starts import limb_start_joints
-from mvpose_nodes.fitting.objective import EDGE_PX, MapArena, boundary_distances, map_floats, outline_of
 from mvpose_nodes.fitting.settings import FitterSettings
 from mvpose_nodes.fitting.stage_search import StageSearch, stage_indices
+from mvpose_nodes.fitting.views import view_from_features, whole_views
 from mvpose_nodes.vision.contour import SIDE_A, SIDE_B, ContourLabels
 
 TORSO_POSITION = stage_indices('torso')[:3]   # torso_x, torso_y, torso_z: the root's position [m]
@@ -63,28 +63,7 @@ TORSO_YAW = PARAMETER_INDEX['torso_rz']   # the body's turn about the vertical [
 # the way they go (in 20 of the suite's 46 tuning cases of seeds 1-4), and one search does not turn the
 # torso that far (search_stages).
 TORSO_START_YAWS = tuple(np.pi * eighth / 4 for eighth in (-2, -1, 1, 2))
-# Keypoints read off the silhouette's shape (vision/silhouette.py): wrong once the image cuts the person off,
-# so left out then; but the root (the silhouette's centroid), shifted as it is, is kept at CUT_ROOT_CONFIDENCE
-# of its confidence: without it, a person cut off in every view (close to the cameras) has no start at all.
-SILHOUETTE_KEYPOINTS = ('left_knee', 'right_knee', 'left_ankle', 'right_ankle')
-CUT_ROOT_CONFIDENCE = 0.2
 HAIR_VIEWS = 500   # the person's hair_gap is measured on this many views (400 in a 50-frame case of 8 cameras), no more
-
-
-@dataclass
-class View:
-    """One camera's evidence for one frame: its Camera, the boundary distance maps of its labelled
-    contour (objective.BoundaryDistances, or None), its 2D keypoints {name: (x, y, confidence)}, how
-    much of the face it sees (features.Features.frontness; None if unknown), its outline
-    (objective.Outline, or None), its skin regions (N, 3): centre x, y [px] and area [px²] (or None), and where
-    the face's skin begins below the top of the head (initialisation.hair_gap; None if unknown)."""
-    camera: object
-    distances: object
-    keypoints: dict
-    frontness: float = None
-    outline: object = None
-    skin: np.ndarray = None
-    hair_gap: float = None
 
 
 @dataclass
@@ -142,13 +121,14 @@ class SkeletonFitter:
         return None if self.given is None else self.given.parameters
 
     def fit(self, stamp, views, skipped=0):
-        """The Fit of the views (View) of the frame set at `stamp` [s]; `skipped`: frame sets passed over since
+        """The Fit of the views (views.View) of the frame set at `stamp` [s]; `skipped`: frame sets passed over since
         the last one (the node's, to keep up), which make a gap of any length no jump in time: the person was
         there throughout, so the fit follows on (re-initialised only if it loses the person) rather than
         start again; a start's comparison costs several fits, and on a slow machine a gap over time_jump after
         each would make every fit a start."""
         started = time.perf_counter()
         settings = self.settings
+        views = whole_views(views, settings.cut_share)
         jump = (self.last_stamp is None or stamp < self.last_stamp
                 or (stamp - self.last_stamp > settings.time_jump and not skipped))
         if self.last_stamp is not None and stamp < self.last_stamp and self.measurements is not None:
@@ -451,35 +431,6 @@ def pelvis_displacement(before, after):
     if before is None or after is None or 'pelvis' not in before or 'pelvis' not in after:
         return None
     return after['pelvis'] - before['pelvis']
-
-
-def view_from_features(camera, keypoints, contour, frontness=None, skin=None, face_top=None, arena=None):
-    """A View of one camera from its features: keypoints {name: (x, y, confidence)} (the visible ones),
-    its ContourLabels (or None), its frontness, its skin regions [(x, y, area)] (the skin ellipses'
-    centres [px] and areas [px²]) and its face ellipse's topmost row [px] (vision.features.ellipse_top; None
-    without one); its distance maps in `arena` (objective.MapArena, sized by frame_set_arena) if given."""
-    distances = outline = None
-    if contour is not None and len(contour.points):
-        distances = boundary_distances(contour, (camera.width, camera.height), MAP_LABELS, arena=arena)
-        outline = outline_of(contour.points, (camera.width, camera.height), arena=arena)
-        if cut_off(contour.points, camera):   # the silhouette's shape no longer says where the knees and ankles are
-            keypoints = {name: value for name, value in keypoints.items() if name not in SILHOUETTE_KEYPOINTS}
-            if 'root' in keypoints:
-                x, y, confidence = keypoints['root']
-                keypoints['root'] = (x, y, confidence * CUT_ROOT_CONFIDENCE)
-    skin = None if skin is None else np.asarray(skin, float).reshape(-1, 3)
-    return View(camera, distances, keypoints, frontness, outline, skin, hair_gap(face_top, keypoints))
-
-
-def cut_off(contour_points, camera):
-    """Whether the image's edge cuts the person of a contour (N, 2) [px] off (a contour pixel within EDGE_PX of it)."""
-    x, y = np.asarray(contour_points).T
-    return bool(np.any((x < EDGE_PX) | (x >= camera.width - EDGE_PX) | (y < EDGE_PX) | (y >= camera.height - EDGE_PX)))
-
-
-def frame_set_arena(contours):
-    """The objective.MapArena for the views of a frame set's ContourLabels (None for a camera without)."""
-    return MapArena(sum(map_floats(c.points, 2 * len(MAP_LABELS)) for c in contours if c is not None))
 
 
 def warm_up():

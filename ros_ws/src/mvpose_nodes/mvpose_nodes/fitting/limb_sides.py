@@ -147,7 +147,7 @@ def legs_on_other_labels(distances, camera, joints):
     boundaries (objective.BoundaryDistances) the other way round: Σ over the thighs' and shins' points of
     the distances to both sides of the other leg's part below that to their own. For a view without leg
     keypoints whose legs are still labelled: the image cutting the person off leaves the knees and ankles out
-    (fitter.view_from_features) after the contour was labelled by them, from a front or back the face only
+    (views.view_from_features) after the contour was labelled by them, from a front or back the face only
     guessed (vision.features), so the keypoints cannot orient its labels. False when a leg's part lacks a
     side or the legs lie behind the camera."""
     if any(label not in distances.widths for label in LEG_BONES):

@@ -78,6 +78,10 @@ class FitterSettings:
               'below its top (the median over the views so far; initialisation.face_tells): hair read as skin '
               'reaches the top (per person 0.00-0.04 for blond and brown hair in the suite, 0.03-0.40 for the '
               'others)', 0.0, 1.0)
+    cut_share: float = setting(
+        0.1, 'a view with more than this share of its contour pixels on the image edge (the person cut off) is left '
+             'out of a frame set in which at least three other views are cut less (fitting/views.py; 1: never)',
+        0.0, 1.0)
     # Left and right, front and back (fitting/limb_sides.py, fitting/hypotheses.py).
     walking_baseline: float = setting(
         0.4, "[s] how long fits are remembered: the last two give each pair's predicted place and the pelvis's "

@@ -16,7 +16,8 @@ from mvpose_msgs.msg import LabelledContour, Skeleton, SkinEllipse
 
 from mvpose_nodes.body.kinematics import bone_lengths, forward_kinematics
 from mvpose_nodes.body.model import PARAMETER_NAMES
-from mvpose_nodes.fitting.fitter import SkeletonFitter, frame_set_arena, view_from_features
+from mvpose_nodes.fitting.fitter import SkeletonFitter
+from mvpose_nodes.fitting.views import frame_set_arena, view_from_features
 from mvpose_nodes.fitting.initialisation import TEMPLATE_HEIGHT, guessed_parameters
 from mvpose_nodes.ros.conversions import (contour_from_message, keypoints_from_messages, skeleton_message,
                                           stage_messages)
