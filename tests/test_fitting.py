@@ -432,6 +432,7 @@ def test_a_view_mostly_cut_off_is_left_out_where_three_others_see_the_person(cmu
     assert whole_views(at_the_share, cut_share) == at_the_share[:3]
     three = fitted([3, 5, 7])
     assert np.array_equal(fitted([3, 5, 7, 1], cut_camera=1), three)
+    assert SkeletonFitter().fit(0.0, four).cameras == (3, 5, 7)   # the skeleton_fitter names them (DEGRADED)
     assert not np.array_equal(fitted([3, 5, 7, 1], cut_camera=1, settings=FitterSettings(cut_share=1.0)), three)
 
 

@@ -74,6 +74,7 @@ class Fit:
     initialised: bool = False    # a start: the fit is the best guess of the start's hypotheses so far
     seconds: float = 0.0
     lost: float = 0.0            # when the fit has lost the person: the outline's unexplained_share, else 0
+    cameras: tuple = ()          # the numbers of the cameras whose views were fitted (views.whole_views)
 
 
 class SkeletonFitter:
@@ -182,7 +183,7 @@ class SkeletonFitter:
         unexplained = unexplained_share(views, track.joints)
         self.lost_fits = self.lost_fits + 1 if unexplained > settings.lost_share else 0
         return Fit(track.joints, track.parameters, track.results, starting, time.perf_counter() - started,
-                   unexplained if self.lost_fits >= settings.lost_frames else 0.0)
+                   unexplained if self.lost_fits >= settings.lost_frames else 0.0, tuple(v.camera.number for v in views))
 
     def start(self, stamp, views, found):
         """A (re)start: the pose from the frame's keypoints (initial_parameters), fitted, and every other

@@ -108,7 +108,7 @@ class FrameSetFitter:
                 fit = self.fitter.fit(stamp_ns / 1e9, views, skipped)
         except ValueError as error:
             return self.lost(stamp_ns, problems, 'fit', joined(f'no fit at {stamp_ns} ns: {error}', skipped_text), views)
-        used = {v.camera.number for v in views}
+        used = set(fit.cameras)   # without the views the fitter left out (cut off: views.whole_views)
         degraded = bool(prepared.missing_cameras) or used != set(self.cameras) or not all(s.fitted for s in fit.stages)
         status = (Skeleton.STATUS_LOST if fit.lost else Skeleton.STATUS_INITIALISING if fit.initialised
                   else Skeleton.STATUS_DEGRADED if degraded else Skeleton.STATUS_OK)
