@@ -40,7 +40,9 @@ class MultiCameraNode(ReportOnce, Node):
         self.given_up = set()     # cameras whose calibration a frame set stopped waiting for
         # When the input stops (a bag's end), the last frame sets are still in the synchroniser, waiting
         # for messages that would prove them complete: flushed once nothing has come for camera_timeout.
-        self.last_input = None    # time.monotonic() of the newest input message since the last flush
+        # time.monotonic() of the newest input message since the last flush (a subclass's own inputs count
+        # too: the skeleton_fitter's frame announcements)
+        self.last_input = None
         self.create_timer(0.1, self.flush_when_idle)   # also releases the sets whose calibration wait is over
         for k in cameras:
             for topic, kind in inputs.items():
