@@ -20,6 +20,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
+from mvpose_nodes.fitting import numba_cache  # noqa: F401  (first: the cache folder of this version's sources)
 from mvpose_nodes.body.model import LABEL_HEAD, LABEL_LEFT_LEG, LABEL_RIGHT_LEG, LABEL_TORSO
 from mvpose_nodes.fitting.compiled_kinematics import CHAIN_END, CHAIN_START, forward_joints, twist_excess
 from mvpose_nodes.fitting.objective import (BILINEAR_STEPS, INSIDE_SAMPLES, MAP_COARSENING, OUTLINE_STEP,

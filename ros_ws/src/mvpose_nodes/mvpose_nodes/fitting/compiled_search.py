@@ -5,6 +5,7 @@ and releasing the GIL as compiled.py's functions do.
 import numpy as np
 from numba import njit
 
+from mvpose_nodes.fitting import numba_cache  # noqa: F401  (first: the cache folder of this version's sources)
 from mvpose_nodes.fitting.compiled import FramePack, StagePack, evaluate, work_arrays
 
 

@@ -30,8 +30,7 @@ from mvpose_nodes.body.model import (JOINT_INDEX, LABEL_HEAD, LABEL_LEFT_LEG, LA
                                      PARAMETER_INDEX)
 from mvpose_nodes.fitting.compiled import LABEL_SLOT, StagePack, fractions_arrays, outline_nearest
 from mvpose_nodes.fitting.compiled_search import search
-from mvpose_nodes.fitting.compiled_kinematics import bone_length_array
-from mvpose_nodes.fitting.limb_limits import LATERAL_STIFFNESS
+from mvpose_nodes.fitting.compiled_kinematics import LATERAL_STIFFNESS, bone_length_array
 from mvpose_nodes.fitting.objective import (CAPSULE_RADII, OUTLINE_STEP, TERMINAL_BONES, cauchy_loss, inside_cost,
                                             limb_cost, outline_cost)
 
@@ -39,9 +38,10 @@ JOINT_LIMITS = {'left_shin_rx': (-2.6, 0.05), 'right_shin_rx': (-2.6, 0.05),    
                 'left_forearm_rx': (-0.05, 2.6), 'right_forearm_rx': (-0.05, 2.6),  # elbows forwards [rad];
                 # the clavicles move little, and no keypoint sees the shoulders: keep them near the rest
                 **{f'{side}_clavicle_{axis}': (-0.5, 0.5) for side in ('left', 'right') for axis in ('ry', 'rz')}}
-# The twist of the limbs whose child is a hinge, about their own axis (limb_limits.limb_twist): (bone, hinge,
-# reference direction and the hinge axis there, in the parent's frame (x right, y forward, z up), the twist's
-# range [rad], and the range [rad] of the limb's lateral angle, the arcsine of its direction's x).
+# The twist of the limbs whose child is a hinge, about their own axis (compiled_kinematics.limb_twist):
+# (bone, hinge, reference direction and the hinge axis there, in the parent's frame (x right, y forward,
+# z up), the twist's range [rad], and the range [rad] of the limb's lateral angle, the arcsine of its
+# direction's x).
 # Without it a thigh turned half round bends its knee forwards and the body facing backwards explains the
 # silhouettes as well as the right one; anatomically the hip turns about ±45° (measured on the suite's
 # tuning motions with the knee bent over 25°: within ±30°, a cartwheel 61°). The arms' reference is the
@@ -140,7 +140,7 @@ def twist_excess(stage, frames, parameters):
     signed angle about the limb's direction d, in its parent's frame, from the hinge axis it would have if
     swung to d from the reference direction by the shortest rotation (Rodrigues), its hinge axis there
     being the neutral one, to the hinge axis (the limb frame's x) it has; the lateral angle: arcsin(d_x).
-    The reference of limb_limits.limb_excess."""
+    The reference of compiled_kinematics.limb_excess."""
     bone, hinge, reference, neutral, (low, high), (lateral_low, lateral_high) = TWIST_LIMITS[stage]
     parent = BONES[BONE_INDEX[bone]].parent
     local = frames[parent].T @ frames[bone] if parent else frames[bone]

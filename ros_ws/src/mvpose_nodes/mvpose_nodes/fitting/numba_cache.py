@@ -1,0 +1,37 @@
+"""Where numba keeps the compiled fitter on disk: a folder per version of the package's sources.
+
+numba's cache (`cache=True`) checks only the source file of the function it loads: a compiled function
+that calls one from another module (compiled_search's search calls compiled's evaluate, which calls
+compiled_kinematics's forward_joints) keeps the old callee when only the callee's file changes, and the
+global arrays a compiled function reads (objective's constants, the kinematic chain) keep the values they
+had at compilation (numba's documentation, "Cache invalidation"; numba issue #1833). After a change to
+compiled.py alone the fitter ran the old objective with the new arguments, silently (session 52). So every module
+with compiled code imports this one before its first `@njit(cache=True)`: numba's cache folder (the user's
+NUMBA_CACHE_DIR, ./mvpose's .venv/numba-cache, else ~/.cache/mvpose/numba) gets a subfolder named by a digest
+of every Python source of mvpose_nodes, and the first start after any change compiles afresh (about 20 s).
+"""
+import hashlib
+import os
+from pathlib import Path
+
+import numba
+
+PACKAGE = Path(__file__).resolve().parent.parent   # mvpose_nodes/
+
+
+def source_digest(package=PACKAGE):
+    """A hex digest (16 characters) of the contents of every .py file under `package`, in path order."""
+    digest = hashlib.sha256()
+    for path in sorted(package.rglob('*.py')):
+        digest.update(str(path.relative_to(package)).encode() + b'\0' + path.read_bytes() + b'\0')
+    return digest.hexdigest()[:16]
+
+
+def cache_folder(base):
+    """The folder numba caches this version's compiled code in: base / 'mvpose-<source_digest()>'."""
+    return os.path.join(base, f'mvpose-{source_digest()}')
+
+
+# NUMBA_CACHE_DIR as numba read it (./mvpose sets .venv/numba-cache), else the user's cache folder
+CACHE_BASE = numba.config.CACHE_DIR or os.path.join(os.path.expanduser('~'), '.cache', 'mvpose', 'numba')
+numba.config.CACHE_DIR = cache_folder(CACHE_BASE)   # read by each @njit(cache=True) as it is decorated
