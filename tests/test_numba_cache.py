@@ -25,7 +25,7 @@ def test_the_digest_changes_with_any_source_and_only_with_the_sources(tmp_path):
 
 def test_every_compiled_function_is_cached_in_this_versions_folder():
     from mvpose_nodes.fitting import compiled, compiled_kinematics, compiled_search
-    folder = numba_cache.cache_folder(numba_cache.CACHE_BASE)
+    folder = numba_cache.CACHE_FOLDER
     assert folder.endswith('mvpose-' + numba_cache.source_digest())
     functions = [compiled.evaluate, compiled.outline_nearest, compiled_kinematics.forward_joints,
                  compiled_search.search, compiled_kinematics.limb_excess]

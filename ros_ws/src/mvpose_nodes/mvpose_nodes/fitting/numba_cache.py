@@ -27,11 +27,7 @@ def source_digest(package=PACKAGE):
     return digest.hexdigest()[:16]
 
 
-def cache_folder(base):
-    """The folder numba caches this version's compiled code in: base / 'mvpose-<source_digest()>'."""
-    return os.path.join(base, f'mvpose-{source_digest()}')
-
-
 # NUMBA_CACHE_DIR as numba read it (./mvpose sets .venv/numba-cache), else the user's cache folder
 CACHE_BASE = numba.config.CACHE_DIR or os.path.join(os.path.expanduser('~'), '.cache', 'mvpose', 'numba')
-numba.config.CACHE_DIR = cache_folder(CACHE_BASE)   # read by each @njit(cache=True) as it is decorated
+CACHE_FOLDER = os.path.join(CACHE_BASE, f'mvpose-{source_digest()}')   # this version's compiled code
+numba.config.CACHE_DIR = CACHE_FOLDER   # read by each @njit(cache=True) as it is decorated
