@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from mvpose_nodes.vision.features import ellipse_of
-from mvpose_nodes.vision.silhouette import (BackgroundModel, chroma_key_foreground, clean_mask, component_box, components,
-                                            silhouette_keypoints)
+from mvpose_nodes.vision.silhouette import (COUNTED_LABELS, BackgroundModel, chroma_key_foreground, clean_mask, component_box,
+                                            components, silhouette_keypoints)
 
 pytestmark = pytest.mark.pure
 
@@ -61,13 +61,16 @@ def test_clean_mask_keeps_the_person_fills_small_holes_not_the_gap_between_legs(
 
 
 @pytest.mark.parametrize('connectivity', [4, 8])
-def test_components_give_opencvs_labels_areas_and_boxes(connectivity):
-    # components() replaces cv2.connectedComponentsWithStats (7x slower here): the same components.
+@pytest.mark.parametrize('density, labels_counted', [(0.02, False), (0.001, True)])
+def test_components_give_opencvs_labels_areas_and_boxes(connectivity, density, labels_counted):
+    # components() replaces cv2.connectedComponentsWithStats (7x slower here): the same components, whether
+    # each label's pixels are counted in a pass of its own (few labels) or by a bincount (many).
     rng = np.random.default_rng(connectivity)
-    mask = cv2.dilate((rng.random((120, 90)) < 0.02).astype(np.uint8), np.ones((3, 3), np.uint8))
+    mask = cv2.dilate((rng.random((120, 90)) < density).astype(np.uint8), np.ones((3, 3), np.uint8))
     labels, areas = components(mask.astype(bool), connectivity)
     count, expected_labels, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=connectivity)
-    assert count > 20 and len(areas) == count
+    assert len(areas) == count and (2 < count <= COUNTED_LABELS) == labels_counted
+    assert areas.dtype == np.int64
     np.testing.assert_array_equal(labels, expected_labels)
     np.testing.assert_array_equal(areas, stats[:, cv2.CC_STAT_AREA])
     for label in range(1, count):
