@@ -187,6 +187,25 @@ def test_the_periodic_probe_rights_a_fit_turned_round(walk, monkeypatch, probed)
         assert all(swapped[WITHIN:]), swapped
 
 
+def test_the_frame_set_on_which_a_rival_wins_gives_out_the_rivals_fit(walk, monkeypatch):
+    """Outside a start the fit given out is that of the hypothesis kept after the frame set's pruning and
+    comparison: on the frame set where the periodic probe's body turned round replaces a fit turned round (as
+    test_the_periodic_probe_rights_a_fit_turned_round), the rival's fit, not the loser's (session 54). The
+    start compares only the arms exchanged, so it ends (and stays turned round) before that probe."""
+    monkeypatch.setattr(fitter_module, 'START_LABELLINGS', (('arms exchanged', RELABELLINGS['arms exchanged']),))
+    monkeypatch.setattr(fitter_module, 'labelled_joints',
+                        lambda views, found, settings: relabelled_joints(found, RELABELLINGS['turned round']))
+    fitter = SkeletonFitter(FitterSettings(probe_period=2, crossing_distance=0.0))
+    replaced = 0
+    for index, (_, views) in enumerate(walk):
+        before = fitter.track
+        fit = fitter.fit(index / 25.0, views)
+        if not fit.initialised:
+            replaced += fitter.track is not before
+            np.testing.assert_array_equal(fit.joints, fitter.track.joints)
+    assert replaced, 'no rival won: the check could not fail'
+
+
 def stride_probes(frames, settings, monkeypatch):
     """Fit `frames` from the true start (no start hypotheses) and return, at each frame set, the fit's ankles'
     distance [m] and whether the legs exchanged were probed there, and the person's leg length [m]."""

@@ -170,15 +170,16 @@ class SkeletonFitter:
                 if labelling is not None:
                     self.probe(stamp, views, found, labelling)
             self.last_apart = apart
-        # While a start's hypotheses are compared, the one that explains the views best so far is given out.
-        track = min([self.track] + self.rivals, key=lambda t: t.cost) if self.starting else self.track
-        self.given = track
         starting = self.starting
         if self.rivals:
             self.window -= 1
             self.prune()
             if self.window <= 0 or not self.rivals:
                 self.compare()
+        # Given out: while a start's hypotheses are compared, the one that explains the views best so far; else
+        # the fit, which this frame set's pruning or comparison may just have replaced by a rival.
+        track = min([self.track] + self.rivals, key=lambda t: t.cost) if self.starting else self.track
+        self.given = track
         self.last_found = found
         unexplained = unexplained_share(views, track.joints)
         self.lost_fits = self.lost_fits + 1 if unexplained > settings.lost_share else 0
