@@ -1,5 +1,7 @@
 """fitting/numba_cache.py: the compiled fitter is cached per version of the package's sources, because numba's
 own cache misses changes in a called function's module and in global arrays."""
+import os
+
 import pytest
 
 from mvpose_nodes.fitting import numba_cache
@@ -31,3 +33,17 @@ def test_every_compiled_function_is_cached_in_this_versions_folder():
                  compiled_search.search, compiled_kinematics.limb_excess]
     for function in functions:
         assert function._cache._cache_path.startswith(folder + '/'), function
+
+
+def test_a_new_versions_folder_removes_all_but_the_most_recently_used_others(tmp_path):
+    for age, name in enumerate('abcdef'):   # mvpose-f used last
+        (tmp_path / f'mvpose-{name}').mkdir()
+        os.utime(tmp_path / f'mvpose-{name}', (1000.0 + age, 1000.0 + age))
+    (tmp_path / 'unrelated').mkdir()
+    folder = numba_cache.used_version_folder(tmp_path, 'mvpose-new', keep=4)
+    assert folder == str(tmp_path / 'mvpose-new')   # numba makes it
+    assert sorted(p.name for p in tmp_path.iterdir()) == ['mvpose-d', 'mvpose-e', 'mvpose-f', 'unrelated']
+    # An existing version's folder is marked as used, and nothing is removed.
+    assert numba_cache.used_version_folder(tmp_path, 'mvpose-d', keep=1) == str(tmp_path / 'mvpose-d')
+    assert (tmp_path / 'mvpose-d').stat().st_mtime > (tmp_path / 'mvpose-f').stat().st_mtime
+    assert sorted(p.name for p in tmp_path.iterdir()) == ['mvpose-d', 'mvpose-e', 'mvpose-f', 'unrelated']

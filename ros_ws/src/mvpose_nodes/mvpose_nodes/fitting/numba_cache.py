@@ -9,14 +9,19 @@ compiled.py alone the fitter ran the old objective with the new arguments, silen
 with compiled code imports this one before its first `@njit(cache=True)`: numba's cache folder (the user's
 NUMBA_CACHE_DIR, ./mvpose's .venv/numba-cache, else ~/.cache/mvpose/numba) gets a subfolder named by a digest
 of every Python source of mvpose_nodes, and the first start after any change compiles afresh (about 20 s).
+Each version's folder takes about 4 MB; the folders of all but the KEPT_VERSIONS most recently used are
+removed as a version's folder is first made (other checkouts sharing the cache keep theirs while in use).
 """
 import hashlib
 import os
+import shutil
 from pathlib import Path
 
 import numba
 
 PACKAGE = Path(__file__).resolve().parent.parent   # mvpose_nodes/
+FOLDER_PREFIX = 'mvpose-'
+KEPT_VERSIONS = 4   # version folders kept, this one among them: a few checkouts or branches in turn
 
 
 def source_digest(package=PACKAGE):
@@ -27,7 +32,25 @@ def source_digest(package=PACKAGE):
     return digest.hexdigest()[:16]
 
 
+def used_version_folder(base, name, keep=KEPT_VERSIONS):
+    """The path of the version folder `name` under `base`, marked as used now (its time set), and the folders
+    of other versions (FOLDER_PREFIX*) beyond the `keep` − 1 most recently used removed when it is new. The
+    folder itself is left to numba to make. Nothing is raised for a cache that cannot be read or written."""
+    folder = Path(base) / name
+    try:
+        if folder.is_dir():
+            os.utime(folder)
+            return str(folder)
+        others = sorted((path for path in Path(base).glob(FOLDER_PREFIX + '*') if path.is_dir() and path != folder),
+                        key=lambda path: path.stat().st_mtime, reverse=True)
+    except OSError:
+        return str(folder)
+    for old in others[keep - 1:]:
+        shutil.rmtree(old, ignore_errors=True)
+    return str(folder)
+
+
 # NUMBA_CACHE_DIR as numba read it (./mvpose sets .venv/numba-cache), else the user's cache folder
 CACHE_BASE = numba.config.CACHE_DIR or os.path.join(os.path.expanduser('~'), '.cache', 'mvpose', 'numba')
-CACHE_FOLDER = os.path.join(CACHE_BASE, f'mvpose-{source_digest()}')   # this version's compiled code
+CACHE_FOLDER = used_version_folder(CACHE_BASE, FOLDER_PREFIX + source_digest())   # this version's compiled code
 numba.config.CACHE_DIR = CACHE_FOLDER   # read by each @njit(cache=True) as it is decorated
