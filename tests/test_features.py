@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from mvpose_nodes.vision.features import ellipse_of
-from mvpose_nodes.vision.silhouette import (COUNTED_LABELS, BackgroundModel, chroma_key_foreground, clean_mask, component_box,
-                                            components, silhouette_keypoints)
+from mvpose_nodes.vision.silhouette import (COUNTED_LABELS, BackgroundModel, chroma_key_foreground, clean_mask,
+                                            component_box, components, silhouette_keypoints)
 
 pytestmark = pytest.mark.pure
 
