@@ -1,5 +1,6 @@
 """`./mvpose bench`: its statistics on constructed numbers. Its one-line errors: test_front_door.py; one run of
 the real graph: test_graph.py."""
+import dataclasses
 import math
 import os
 import re
@@ -132,10 +133,26 @@ def test_open_loop_table_reports_share_fitted_skips_and_error():
     table = bench.format_table(result)
     assert "open loop at 1× the bag's speed: 2 of 4 frame sets fitted (50 %), 2 skipped by the fitter as stale" in table
     assert '(2 of 4 fitted, 1 passed over (a later one was fitted), 1 dropped (no answer in 60 s))' in table
+    with_lost = bench.format_table(dataclasses.replace(result, overtaken=0, lost=1))
+    assert '(2 of 4 fitted, 1 lost (STATUS_LOST), 1 dropped (no answer in 60 s))' in with_lost
     assert 'mean joint error of the fitted frame sets: 35 mm (2 with ground truth)' in table
     assert ('fitted in each quarter of the frame sets sent (their mean joint error): 1 of 1 (30 mm), 0 of 1 (- mm), '
             '1 of 1 (40 mm), 0 of 1 (- mm)') in table
     assert re.search(r'skeleton_fitter\s+fit 50\.0\s+total 100\.0', table)      # ms per frame set sent
+
+
+def test_soak_report_counts_every_outcome_memory_growth_and_latency_drift():
+    samples = [bench.SoakSample(answered, 10.0 * index, {'skeleton_fitter': mib}, latency)
+               for index, (answered, mib, latency) in enumerate([(50, 200.0, 90.0), (100, 240.0, 70.0),
+                                                                   (150, 241.0, 75.0), (200, 242.5, 80.0)])]
+    result = bench.BenchResult('bags/x', (3, 5, 7), 960, 540, 2, 200, sent={s: 0.0 for s in range(200)},
+                               skeletons={s: (0.1, 0.05) for s in range(190)}, unfitted=1, lost=6, overtaken=2,
+                               dropped=1, wall_seconds=30.0, samples=samples)
+    report = bench.format_soak(result, warm_up=100)
+    assert ('fitted 190; too few views 1; lost (STATUS_LOST) 6; passed over 2; skipped by the fitter 0; '
+            'dropped (no answer in 60 s) 1') in report
+    assert 'RSS growth from 100 to 200 frame sets [MiB]: skeleton_fitter 2.5' in report   # from the warm-up on
+    assert 'median of the first sample after warm-up 75 ms, of the last 80 ms (range 75–80 ms)' in report
 
 
 def test_transport_table_subtracts_the_bare_header_round_trip():

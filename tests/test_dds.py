@@ -7,11 +7,12 @@ from pathlib import Path
 import pytest
 import rclpy
 import yaml
-from common import run_mvpose, spin_until
+from common import Publisher, run_mvpose, spin_for, spin_until
 from mvpose_msgs.msg import Skeleton
 from samples import sample_skeleton
 
 from mvpose_nodes.io.msgdict import message_to_yaml, set_message_fields
+from mvpose_nodes.ros.helpers import EVERY_SKELETON, LATCHED
 from mvpose_nodes.tools.topic import rate_statistics
 
 pytestmark = pytest.mark.dds
@@ -48,6 +49,26 @@ def test_skeleton_from_another_process_arrives_intact(tmp_path, ros_context):
         publisher.kill()
         node.destroy_node()
     assert received == [sample_skeleton(seed) for seed in (11, 12, 13)]
+
+
+def test_a_reader_of_every_skeleton_keeps_those_its_executor_has_not_taken(ros_context):
+    """The bench's, the soak's and the demo's subscription (EVERY_SKELETON) to skeletons published as the
+    skeleton_fitter publishes them (LATCHED): 20 published while the reader's executor is busy (not spinning)
+    are all taken once it spins, in order. A LATCHED reader, as the bench used to be, keeps only the newest."""
+    node = rclpy.create_node('dds_test_every_skeleton')
+    try:
+        every, newest = [], []
+        node.create_subscription(Skeleton, TOPIC, every.append, EVERY_SKELETON)
+        node.create_subscription(Skeleton, TOPIC, newest.append, LATCHED)
+        skeletons = [sample_skeleton(seed) for seed in range(20)]
+        publisher = Publisher(node, Skeleton, TOPIC, LATCHED).publish(*skeletons, subscribers=2)
+        assert publisher.wait_for_acknowledgements(timeout=30)   # in both readers' histories, none taken yet
+        spin_until(node, lambda: len(every) == 20, 30, f'20 skeletons on {TOPIC}')
+        spin_for(node, 0.5)
+    finally:
+        node.destroy_node()
+    assert every == skeletons
+    assert newest == skeletons[-1:]
 
 
 def test_topic_pub_to_topic_echo(background):

@@ -19,9 +19,11 @@ Wall times in this process give the latencies:
   fit         Skeleton.fit_time, the fit alone
   end to end  images published -> /mvpose/skeleton of that stamp received
 
-A frame set still unanswered when a later one is fitted was passed over (the fitter fits in stamp order
-and skips what it cannot keep up with); one without any answer for STALL_TIMEOUT (closed loop) or
-DRAIN_TIMEOUT (open loop) counts as dropped.
+A frame set answered with STATUS_LOST (no fit: the fitter lost the person, or had fewer than 2 views with
+one) is lost, or has too few views; one still unanswered when a later one is fitted was passed over (the
+fitter fits in stamp order and skips what it cannot keep up with); one without any answer for STALL_TIMEOUT
+(closed loop) or DRAIN_TIMEOUT (open loop) counts as dropped. The skeletons are read with a deep history
+(helpers.EVERY_SKELETON), so none is missed while this process is slow.
 
 end-to-end throughput = frame sets fitted / (last skeleton received - first images published);
 decode-only throughput = 1 / (cameras x median decode time of one image): frame sets per second that one
@@ -175,7 +177,7 @@ def run_bench(bag, window, rate, limit, log_path, total=None, sample_every=None,
     from mvpose_nodes.app.progress import Progress
     from mvpose_nodes.ros.conversions import joints_from_skeleton, stamp_ns
     from mvpose_nodes.ros.diagnostics import DIAGNOSTICS_TOPIC, stage_cpu
-    from mvpose_nodes.ros.helpers import LATCHED, StopSignal, wait_for_acknowledgements
+    from mvpose_nodes.ros.helpers import EVERY_SKELETON, LATCHED, StopSignal, wait_for_acknowledgements
 
     cameras = tuple(cameras)
     calibration, frame_sets = load_frame_sets(bag, cameras, limit)
@@ -197,8 +199,9 @@ def run_bench(bag, window, rate, limit, log_path, total=None, sample_every=None,
     with open(log_path, 'w') as log, StopSignal() as stop:
         launch = Launch(load_launch_file(launch_file(cameras)), output=log)
         node = rclpy.create_node('mvpose_bench')
-        answered = {}      # stamp -> 'fitted' | 'unfitted' | 'passed over' | 'dropped'
+        answered = {}      # stamp -> 'fitted' | 'lost' | 'unfitted' | 'passed over' | 'dropped'
         statuses = {}      # stamp -> {camera: LabelledContour status}
+        lost = set()       # stamps answered with STATUS_LOST
         diagnostics = {}   # node name -> (time received, DiagnosticStatus), the newest
 
         def contour_receiver(camera):
@@ -211,9 +214,11 @@ def run_bench(bag, window, rate, limit, log_path, total=None, sample_every=None,
 
         def skeleton(message):
             stamp = stamp_ns(message.header)
+            if stamp not in result.sent or stamp in answered:
+                return
             if message.status == Skeleton.STATUS_LOST:
-                return   # no fit: the last pose repeated (counted as too few views below)
-            if stamp in result.sent and stamp not in result.skeletons:
+                lost.add(stamp)   # answered without a fit (the last pose repeated): counted below
+            else:
                 result.skeletons[stamp] = (time.monotonic(), message.fit_time)
                 if keep_messages:
                     result.messages[stamp] = message
@@ -240,7 +245,7 @@ def run_bench(bag, window, rate, limit, log_path, total=None, sample_every=None,
 
         for k in cameras:
             node.create_subscription(LabelledContour, f'/cam{k}/labelled_contour', contour_receiver(k), 100)
-        node.create_subscription(Skeleton, SKELETON_TOPIC, skeleton, LATCHED)
+        node.create_subscription(Skeleton, SKELETON_TOPIC, skeleton, EVERY_SKELETON)
         node.create_subscription(DiagnosticArray, DIAGNOSTICS_TOPIC, diagnostic, 100)
         image_qos = QoSProfile(depth=IMAGE_DEPTH, reliability=ReliabilityPolicy.RELIABLE)
         image_publishers = {k: node.create_publisher(CompressedImage, f'/cam{k}/image_raw/compressed', image_qos)
@@ -293,6 +298,9 @@ def run_bench(bag, window, rate, limit, log_path, total=None, sample_every=None,
                             sum(s == LabelledContour.STATUS_OK for s in views.values()) < 2:
                         answered[stamp] = 'unfitted'   # the fitter does not fit fewer than 2 views
                         result.unfitted += 1
+                    elif stamp not in answered and stamp in lost:
+                        answered[stamp] = 'lost'   # the fitter said it lost the person (Skeleton.STATUS_LOST)
+                        result.lost += 1
                     elif stamp not in answered and newest_fitted is not None and stamp < newest_fitted:
                         answered[stamp] = 'passed over'   # the fitter fits in stamp order: it skipped this one
                         result.overtaken += 1
@@ -448,7 +456,8 @@ def soak_main(argv=None, prog='soak'):
         result = run_bench(bag, DEFAULT_WINDOW, None, None, root / 'output' / 'soak' / 'graph.log',
                            total=args.frame_sets, sample_every=args.sample_every)
         print(format_soak(result, args.warm_up), flush=True)
-    # Passed over and skipped frame sets are the fitter keeping to the newest (on purpose); dropped ones are lost.
+    # Passed over and skipped frame sets are the fitter keeping to the newest (on purpose), lost ones its answer
+    # that it lost the person; dropped ones got no answer at all.
     return 0 if result.dropped == 0 and len(result.sent) == result.frame_sets else 1
 
 

@@ -53,7 +53,7 @@ def run_graph(bag, log_path, rate=1.0, on_skeleton=None):
     from mvpose_nodes.ros.camera_bag import GROUND_TRUTH_TOPIC, SKELETON_TOPIC, cameras_in
     from mvpose_nodes.tools.launch import Launch, load_launch_file
     from mvpose_nodes.ros.conversions import stamp_ns
-    from mvpose_nodes.ros.helpers import LATCHED, StopSignal
+    from mvpose_nodes.ros.helpers import EVERY_SKELETON, StopSignal
     cameras_in(bag, GRAPH_CAMERAS)
 
     reader = BagReader(bag)
@@ -76,7 +76,7 @@ def run_graph(bag, log_path, rate=1.0, on_skeleton=None):
             run.fitted[stamp] = message
             if on_skeleton:
                 on_skeleton(message, run)
-        node.create_subscription(Skeleton, SKELETON_TOPIC, fitted, LATCHED)
+        node.create_subscription(Skeleton, SKELETON_TOPIC, fitted, EVERY_SKELETON)
         node.create_subscription(Skeleton, GROUND_TRUTH_TOPIC,
                                  lambda message: run.truth.__setitem__(stamp_ns(message.header), message), 100)
         try:

@@ -36,6 +36,12 @@ M_TRIM_THRESHOLD, M_MMAP_THRESHOLD = -1, -3   # mallopt's parameter numbers (gli
 
 # Reliable, transient-local, depth 1: calibration, and the last skeleton for late subscribers.
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+# A reader of /mvpose/skeleton that must see every skeleton (bench, soak, demo): compatible with LATCHED, but
+# its history keeps up to 100 skeletons its executor has not taken yet. With LATCHED's depth of 1 each new
+# skeleton replaced the one not yet taken whenever the reader's process was slow (a soak beside three busy
+# loops lost 2 of 300 frame sets so).
+EVERY_SKELETON = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
+                            durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 
 class ReportOnce:
