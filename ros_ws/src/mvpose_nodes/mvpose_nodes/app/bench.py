@@ -294,18 +294,18 @@ def run_bench(bag, window, rate, limit, log_path, total=None, sample_every=None,
                 newest_fitted = max(result.skeletons, default=None)
                 for stamp in list(outstanding):
                     views = statuses.get(stamp, {})
-                    if stamp not in answered and len(views) == len(cameras) and \
-                            sum(s == LabelledContour.STATUS_OK for s in views.values()) < 2:
+                    if stamp in answered:
+                        pass   # fitted: the skeleton callback said so
+                    elif len(views) == len(cameras) and sum(s == LabelledContour.STATUS_OK for s in views.values()) < 2:
                         answered[stamp] = 'unfitted'   # the fitter does not fit fewer than 2 views
                         result.unfitted += 1
-                    elif stamp not in answered and stamp in lost:
+                    elif stamp in lost:
                         answered[stamp] = 'lost'   # the fitter said it lost the person (Skeleton.STATUS_LOST)
                         result.lost += 1
-                    elif stamp not in answered and newest_fitted is not None and stamp < newest_fitted:
+                    elif newest_fitted is not None and stamp < newest_fitted:
                         answered[stamp] = 'passed over'   # the fitter fits in stamp order: it skipped this one
                         result.overtaken += 1
-                    elif stamp not in answered and now - result.sent[stamp] > (
-                            STALL_TIMEOUT if rate is None else DRAIN_TIMEOUT):
+                    elif now - result.sent[stamp] > (STALL_TIMEOUT if rate is None else DRAIN_TIMEOUT):
                         answered[stamp] = 'dropped'
                         result.dropped += 1
                     if stamp in answered:
