@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from mvpose_nodes.vision.skin import (BINS, SkinModel, SkinModelError, detect_skin, mask_counts, scores_of_counts,
-                                     skin_regions, surround_contrast)
+                                     skin_on_cloth, skin_regions, surround_contrast)
 
 pytestmark = pytest.mark.pure
 
@@ -253,6 +253,28 @@ def test_surround_contrast_tells_a_hand_from_a_patch_of_cloth_of_its_colour():
     assert surround_contrast(image, skin, hand_region, silhouette, 3) == pytest.approx(chroma_distance, abs=2)
     # With no person around it (the silhouette is the region itself) there is nothing to compare with.
     assert surround_contrast(image, skin, hand_region, hand_mask, 3) is None
+
+
+def test_skin_on_cloth_keeps_the_hand_and_drops_the_sleeve_of_skin_colour():
+    # A beige sleeve that the skin model takes for skin, shaded darker along its length, and a hand of the same
+    # lightness but skin's redness at its end (CIE a* 130 and 138 + 128): one skin region, too large for a hand.
+    rng = np.random.default_rng(5)
+    sleeve, hand = np.zeros((100, 200), bool), np.zeros((100, 200), bool)
+    sleeve[30:70, 10:150] = True
+    hand[35:65, 150:185] = True
+    image = colours(rng, 100 * 200, (40, 70, 180), 4).reshape(100, 200, 3)
+    shading = np.linspace(0.7, 1.0, 140)[None, :, None]
+    image[30:70, 10:150] = np.clip(shading * (194, 178, 152) + rng.normal(0, 3, (40, 140, 3)), 0, 255).astype(np.uint8)
+    image[hand] = colours(rng, hand.sum(), (206, 170, 149), 3)
+    skin = sleeve | hand
+    regions = skin_regions(skin, min_area=10)
+    assert len(regions) == 1
+    kept, changed = skin_on_cloth(image, skin, regions, max_area=3000, redness=3, opening=2)
+    assert changed and (kept & sleeve).sum() < 0.01 * sleeve.sum()
+    assert (kept & hand).sum() > 0.9 * hand.sum()
+    # A region no larger than max_area is left as it is.
+    same, changed = skin_on_cloth(image, skin, regions, max_area=regions[0].area, redness=3, opening=2)
+    assert same is skin and not changed
 
 
 def test_f1_score_of_known_masks():

@@ -9,6 +9,9 @@ of its major axis, and the head top where the major axis, continued upwards, lea
 (the hair is not skin); a forearm ellipse (short sleeves) gives the elbow at the end nearer the neck
 and the hand at the other; a hand ellipse (long sleeves) gives the hand only. The wrist joint lies
 WRIST_FRACTION of the way from the elbow end to the hand end of a forearm ellipse.
+Beyond the paper: a skin region too large for a hand or forearm (HAND_MAX_AREA) is cloth of skin's colour,
+perhaps with hands on it; only its pixels redder than its median stay skin (skin.skin_on_cloth), so that
+the hands in front of a beige shirt are found among it.
 
 Left and right: the face decides whether the camera sees the person's front (much skin on the head)
 or back; from the front the person's left is on the image right. Keypoint names are those of
@@ -30,7 +33,7 @@ from mvpose_nodes.body.model import LABEL_NONE
 from mvpose_nodes.vision.contour import ContourLabels, label_contour
 from mvpose_nodes.vision.silhouette import (BLUENESS_THRESHOLD, CLOSING_PX, OPENING_PX, chroma_key_foreground, clean_mask,
                                               component_box, components, silhouette_keypoints)
-from mvpose_nodes.vision.skin import detect_skin, skin_regions, surround_contrast
+from mvpose_nodes.vision.skin import detect_skin, skin_on_cloth, skin_regions, surround_contrast
 
 ROLE_UNKNOWN, ROLE_FACE, ROLE_HAND, ROLE_FOREARM = range(4)   # SkinEllipse.ROLE_*
 SIDE_NONE, SIDE_LEFT, SIDE_RIGHT = range(3)                    # SkinEllipse.SIDE_*
@@ -47,6 +50,8 @@ HAND_MAX_AREA = 0.02     # a hand's or forearm's skin region covers at most this
 HAND_MAX_LENGTH = 0.2    # ... and its ellipse's semi-major axis at most this share of the stature
 HAND_MIN_CONTRAST = 5.0  # ... and its a*b* differ by at least this from the person around it (skin.surround_contrast)
 SURROUND_BAND = 0.008    # the band around a skin region that surround_contrast compares it with, as a share of the stature
+CLOTH_REDNESS = 3.0      # [CIE a*] a skin region over HAND_MAX_AREA keeps as skin what is this much redder than its median
+CLOTH_OPENING_PX = 2     # [px] ... opened with a disc of this radius (skin.skin_on_cloth)
 BOX_SCALE = 4            # the person is found on an image this many times smaller, then processed in its box
 BOX_MARGIN = 0.05        # of the person's size, around its box
 # The image sizes FeatureExtractor takes [px]: the person is first found at 1/BOX_SCALE of the size, which
@@ -177,8 +182,13 @@ class FeatureExtractor:
             return Features(False, silhouette, skin, keypoints={n: Keypoint() for n in KEYPOINT_NAMES}, timings=timings)
         min_skin = max(10, int(s.skin_min_area_fraction * area)) // r ** 2   # [px of the reduced box]
         skin_crop = detect_skin(self.skin_model, crop, s.skin_threshold, region=person, min_area=min_skin)
-        skin[y0:y1, x0:x1] = enlarged_mask(skin_crop, r)
         regions = skin_regions(skin_crop, min_area=min_skin)
+        # Skin-coloured cloth out, the hands on it kept: the hands' regions are then found again.
+        skin_crop, found_again = skin_on_cloth(crop, skin_crop, regions, HAND_MAX_AREA * points.height ** 2,
+                                               CLOTH_REDNESS, -(-CLOTH_OPENING_PX // r))
+        if found_again:
+            regions = skin_regions(skin_crop, min_area=min_skin)
+        skin[y0:y1, x0:x1] = enlarged_mask(skin_crop, r)
         lap('skin')
         ellipses, keypoints, hand_masks, frontness = self._interpret(regions, person, points, skin_crop, crop)
         lap('ellipses')
