@@ -91,6 +91,41 @@ def test_silhouette_keypoints_of_a_known_figure():
     assert silhouette_keypoints(np.zeros_like(mask)) is None
 
 
+def seated_person_leaning_forward(image, colour=(90, 40, 40)):
+    """Draw a person seated, seen from the side, facing image right and leaning forward: the rounded back rises
+    above where the neck leaves it, the head further forward and higher. Returns the head's top (x, y)."""
+    cv2.line(image, (430, 330), (440, 210), colour, 84)                  # trunk
+    cv2.circle(image, (440, 200), 42, colour, -1)                        # rounded back
+    cv2.line(image, (468, 190), (495, 140), colour, 28)                  # neck
+    cv2.ellipse(image, (508, 118), (26, 32), -30, 0, 360, colour, -1)    # head
+    cv2.line(image, (430, 330), (520, 340), colour, 44)                  # thighs
+    cv2.line(image, (520, 340), (525, 460), colour, 36)                  # shins
+    return 505, 86
+
+
+def test_the_head_of_a_person_leaning_forward_is_found_beyond_the_back(monkeypatch):
+    from mvpose_nodes.vision import silhouette
+    image = blue_screen()
+    head_top = seated_person_leaning_forward(image)
+    mask = clean_mask(chroma_key_foreground(image))
+    assert np.hypot(*np.subtract(silhouette_keypoints(mask).top, head_top)) < 6
+    monkeypatch.setattr(silhouette, 'HEAD_BUMP', 0.0)   # the trunk's column alone ends on the back
+    assert np.hypot(*np.subtract(silhouette_keypoints(mask).top, head_top)) > 50
+
+
+def test_arms_raised_beside_the_head_are_not_taken_for_it(monkeypatch):
+    from mvpose_nodes.vision import silhouette
+    image = blue_screen()
+    stick_person(image)
+    for shoulder, hand in (((452, 150), (454, 40)), ((508, 150), (506, 40))):
+        cv2.line(image, shoulder, hand, (90, 40, 40), 14)   # beside the head, the hands above it
+    mask = clean_mask(chroma_key_foreground(image))
+    head_top = (480, 70)
+    assert np.hypot(*np.subtract(silhouette_keypoints(mask).top, head_top)) < 4
+    monkeypatch.setattr(silhouette, 'HEAD_MIN_WIDTH', 0.0)   # an arm as wide as a head: the column goes up it
+    assert np.hypot(*np.subtract(silhouette_keypoints(mask).top, head_top)) > 30
+
+
 def test_background_model_finds_a_new_object_and_follows_slow_light_changes():
     rng = np.random.default_rng(3)
     scene = rng.integers(0, 255, (120, 160, 3)).astype(np.uint8)

@@ -31,6 +31,8 @@ HEAD_WIDTH_BAND = (0.08, 0.22)  # the head's width: the runs this share of the c
 SHOULDER_WIDENING = 1.8   # the shoulders' row is the first this many times as wide as the head
 TRUNK_WIDENING = 1.15     # head_column: a run wider than this times the median so far has an arm held out
 SHOULDER_DEPTH = (0.09, 0.22)  # ... and lies this share of the stature below the head's top (the template: 0.14)
+HEAD_BUMP = 0.08          # head_column: a run that ends this share of the height above a split is a leaning back's
+HEAD_MIN_WIDTH = 0.07     # ... if the other branch's median width is a head's (raised arms': 0.04-0.045 of it)
 COUNTED_LABELS = 16       # components: up to this many labels, each one's pixels are counted in a pass of its own
 
 
@@ -204,31 +206,31 @@ def head_column(mask, root, bottom=None):
     the middle of each run at most TRUNK_WIDENING times the median width so far, not one with an arm held out
     or touching the head) leads up the trunk and neck to the
     top of the head, past raised arms, which leave that run to the sides; the silhouette's highest pixel is
-    a raised hand instead. Scanned on a HEAD_SCAN_SCALE times coarser grid, then the head's highest pixel
-    found in the image over the last run. Shoulders: going back down from the top, the first row at least
-    SHOULDER_WIDENING times the head's width (the median width of the runs HEAD_WIDTH_BAND of the column's
-    length below the top), None if no row is or the first is not SHOULDER_DEPTH of the stature (from the top down
-    to `bottom`, the lowest row, or the image's) below the top (a view from the side; arms held out lower down).
-    Returns ((x, y), (x, y) or None) [px]."""
+    a raised hand instead. Where that run ends less than HEAD_BUMP of the silhouette's height above the last
+    row where another run was left aside, and the other goes on higher and as wide as a head (HEAD_MIN_WIDTH),
+    the run followed was the back of a person leaning forward (sitting down, seen from the side) and the other
+    the head: the column goes on up the other. Scanned on a HEAD_SCAN_SCALE times coarser grid, then the head's
+    highest pixel found in the image over the last run. Shoulders: going back down from the top, the first row
+    at least SHOULDER_WIDENING times the head's width (the median width of the runs HEAD_WIDTH_BAND of the
+    column's length below the top), None if no row is or the first is not SHOULDER_DEPTH of the stature (from
+    the top down to `bottom`, the lowest row, or the image's) below the top (a view from the side; arms held
+    out lower down). Returns ((x, y), (x, y) or None) [px]."""
     coarse = mask[::HEAD_SCAN_SCALE, ::HEAD_SCAN_SCALE]
     x, row = int(root[0] // HEAD_SCAN_SCALE), min(int(root[1] // HEAD_SCAN_SCALE), coarse.shape[0] - 1)
-    left, right = x, x + 1
-    middle = x + 0.5   # of the trunk: the last run not much wider than the runs so far (not an arm held out)
-    runs, widths = [], []   # (row, first column, last column + 1) on the coarse grid, from the centroid up; widths sorted
     row_runs = foreground_runs(coarse[:row + 1])
-    for row in range(row, -1, -1):
-        overlapping = [(start, end) for start, end in row_runs[row] if start < right and end > left]
-        if not overlapping:
-            break
-        if max(end - start for start, end in overlapping) > 1:   # a sliver of one coarse cell beside a wider
-            overlapping = [(start, end) for start, end in overlapping if end - start > 1]   # run: keying noise
-        left, right = min(overlapping, key=lambda run: abs(0.5 * (run[0] + run[1]) - middle))
-        runs.append((row, left, right))
-        bisect.insort(widths, right - left)
-        count = len(widths)   # their median, as np.median gives it (without its overhead in this loop)
-        median = widths[count // 2] if count % 2 else 0.5 * (widths[count // 2 - 1] + widths[count // 2])
-        if right - left <= TRUNK_WIDENING * median:   # a cell a row at most: a lean of 45° (an arm
-            middle += min(max(0.5 * (left + right) - middle, -1.0), 1.0)   # touching the head jumps further)
+    runs, splits = trunk_column(row_runs, row, (x, x + 1), [])
+    if runs and splits:
+        split, others = splits[-1]
+        end = runs[-1][0]
+        height = (mask.shape[0] if bottom is None else bottom) / HEAD_SCAN_SCALE - end   # [coarse rows]
+        if split - end < HEAD_BUMP * height:
+            below = [run for run in runs if run[0] > split]
+            _, *followed = runs[len(below)]
+            other = min(others, key=lambda run: abs(run[0] + run[1] - followed[0] - followed[1]))
+            branch, _ = trunk_column(row_runs, split, other, below)
+            widths = [right - left for _, left, right in branch[len(below):]]
+            if branch[-1][0] < end and np.median(widths) >= HEAD_MIN_WIDTH * height:
+                runs = branch
     if not runs:
         rows, columns = np.nonzero(mask)
         top_row = rows.min()
@@ -254,6 +256,34 @@ def head_column(mask, root, bottom=None):
     if not SHOULDER_DEPTH[0] * stature <= row * HEAD_SCAN_SCALE - top[1] <= SHOULDER_DEPTH[1] * stature:
         return top, None   # widening elsewhere: arms held out lower down, or a view from the side
     return top, (float(0.5 * (left + right) * HEAD_SCAN_SCALE), float(row * HEAD_SCAN_SCALE))
+
+
+def trunk_column(row_runs, row, start, below):
+    """head_column's walk up the coarse grid, whose runs per row are `row_runs` (foreground_runs), from `row` and
+    the columns `start` (first, last + 1) there, after the runs `below` [(row, first, last + 1), ...] (from the
+    centroid up). Returns the runs from the centroid up to where the
+    walk ends, and the rows where it left other overlapping runs aside: [(row, [(first, last + 1), ...]), ...],
+    from the lowest up."""
+    runs, widths, splits = list(below), sorted(right - left for _, left, right in below), []
+    left, right = start
+    middle = 0.5 * (left + right)   # of the trunk: the last run not much wider than those so far (no arm held out)
+    for row in range(row, -1, -1):
+        overlapping = [(first, end) for first, end in row_runs[row] if first < right and end > left]
+        if not overlapping:
+            break
+        if max(end - first for first, end in overlapping) > 1:   # a sliver of one coarse cell beside a wider
+            overlapping = [(first, end) for first, end in overlapping if end - first > 1]   # run: keying noise
+        chosen = min(overlapping, key=lambda run: abs(0.5 * (run[0] + run[1]) - middle))
+        if len(overlapping) > 1:
+            splits.append((row, [run for run in overlapping if run != chosen]))
+        left, right = chosen
+        runs.append((row, left, right))
+        bisect.insort(widths, right - left)
+        count = len(widths)   # their median, as np.median gives it (without its overhead in this loop)
+        median = widths[count // 2] if count % 2 else 0.5 * (widths[count // 2 - 1] + widths[count // 2])
+        if right - left <= TRUNK_WIDENING * median:   # a cell a row at most: a lean of 45° (an arm
+            middle += min(max(0.5 * (left + right) - middle, -1.0), 1.0)   # touching the head jumps further)
+    return runs, splits
 
 
 def foreground_runs(mask):
