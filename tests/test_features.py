@@ -6,7 +6,7 @@ import cv2
 import numpy as np
 import pytest
 
-from mvpose_nodes.vision.features import ellipse_of
+from mvpose_nodes.vision.features import HEAD_FRACTION, ellipse_of, head_frontness
 from mvpose_nodes.vision.silhouette import (COUNTED_LABELS, BackgroundModel, chroma_key_foreground, clean_mask,
                                             component_box, components, silhouette_keypoints)
 
@@ -124,6 +124,38 @@ def test_arms_raised_beside_the_head_are_not_taken_for_it(monkeypatch):
     assert np.hypot(*np.subtract(silhouette_keypoints(mask).top, head_top)) < 4
     monkeypatch.setattr(silhouette, 'HEAD_MIN_WIDTH', 0.0)   # an arm as wide as a head: the column goes up it
     assert np.hypot(*np.subtract(silhouette_keypoints(mask).top, head_top)) > 30
+
+
+def cropped_head(facing_camera, arms_raised=False):
+    """Silhouette and skin (bool (300, 300)) of a head (semi-axes 40 x 50 px, top at (150, 50)) on a bare neck and
+    a clothed torso, hair cropped as the studio cuts it (studio/scene.py `_resolve_hair`: hair where the surface's
+    normal points up over 0.55, or backwards over 0.35 and not down over 0.2), the face towards the camera or
+    away; optionally bare arms raised beside the head. Returns (silhouette, skin, head pixels)."""
+    rows, columns = np.mgrid[0:300, 0:300]
+    x, up = (columns - 150) / 40.0, (100 - rows) / 50.0
+    head = x ** 2 + up ** 2 <= 1.0
+    towards_camera = np.sqrt(np.clip(1.0 - x ** 2 - up ** 2, 0.0, None))
+    backwards = -towards_camera if facing_camera else towards_camera
+    hair = head & ((up > 0.55) | ((backwards > 0.35) & (up > -0.2)))
+    neck = (np.abs(columns - 150) <= 18) & (rows > 140) & (rows <= 175)
+    torso = (np.abs(columns - 150) <= 90) & (rows > 175)
+    arms = ((np.abs(columns - 80) <= 10) | (np.abs(columns - 220) <= 10)) & (rows > 30) if arms_raised else False
+    silhouette = head | neck | torso | arms
+    return silhouette, (head & ~hair) | neck | (arms & ~torso), head
+
+
+def test_the_face_is_told_from_the_back_of_a_cropped_head():
+    """Issue 13: the back of a cropped head is skin at its sides and nape, so that the skin share of the whole
+    head is as high as a face's, but the middle of the head is hair (head_frontness)."""
+    stature = 100 / HEAD_FRACTION   # the head (100 px) is HEAD_FRACTION of it
+    measured = {}
+    for facing_camera in (True, False):
+        silhouette, skin, head = cropped_head(facing_camera)
+        measured[facing_camera] = head_frontness(silhouette, skin, (150, 50), stature)
+        with_arms = cropped_head(facing_camera, arms_raised=True)
+        assert head_frontness(*with_arms[:2], (150, 50), stature) == measured[facing_camera], 'the arms are not the head'
+    assert skin[head].mean() > 0.4, 'the back of the head: much of it skin'
+    assert measured[True] >= 0.9 and measured[False] <= 0.3
 
 
 def test_background_model_finds_a_new_object_and_follows_slow_light_changes():
