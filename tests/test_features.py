@@ -145,8 +145,8 @@ def cropped_head(facing_camera, arms_raised=False):
 
 
 def test_the_face_is_told_from_the_back_of_a_cropped_head():
-    """Issue 13: the back of a cropped head is skin at its sides and nape, so that the skin share of the whole
-    head is as high as a face's, but the middle of the head is hair (head_frontness)."""
+    """Issue 13: the back of a cropped head is skin at its sides and nape, so that much of the whole head is
+    skin (over 0.4 of it here), but the middle of the head is hair (head_frontness)."""
     stature = 100 / HEAD_FRACTION   # the head (100 px) is HEAD_FRACTION of it
     measured = {}
     for facing_camera in (True, False):
