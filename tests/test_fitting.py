@@ -194,7 +194,7 @@ def test_the_subjects_known_bone_lengths_are_kept_and_fit_closer(cmu_walk):
     and the true outlines) is followed more closely than with the lengths measured on the first frame set
     (about 13 against 18 mm). With keypoints alone a walker's legs fit either way round (each keypoint goes to
     the pose's nearer leg), so the strides' probe of the legs can take the exchanged legs (at frame set 12 of
-    this walk, session 63) and the comparison would be of where that falls, not of the lengths."""
+    this walk) and the comparison would be of where that falls, not of the lengths."""
     motion = cmu_walk.placed()
     frames = rendered_views(motion, studio_rig((960, 540), cameras=[3, 5, 7]), range(12))
     true_lengths = lengths_of(motion.joints)
