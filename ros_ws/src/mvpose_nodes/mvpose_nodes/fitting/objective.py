@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
+from mvpose_nodes.fitting.distance_transform import exact_distances
 from mvpose_nodes.vision.contour import SIDE_A, SIDE_B
 
 SEGMENT_POINTS = 100  # N of Eq. 4
@@ -138,30 +139,31 @@ def bilinear(distance_map, local):
 def boundary_distances(contour_labels, image_size, labels=None, margin=MAP_MARGIN_PX, arena=None):
     """BoundaryDistances of one camera's ContourLabels for the parts in `labels` (default: every label
     with pixels on both sides), their maps in `arena` (a MapArena) if given. image_size: (width, height)
-    [px]. One cv2.distanceTransform (DIST_L2, DIST_MASK_PRECISE: exact Euclidean distances) per
-    (label, side) on a mask that is 0 on that side's boundary pixels, restricted to the part's box (a third
+    [px]. One exact Euclidean distance transform (distance_transform.exact_distances) per (label, side)
+    from that side's boundary pixels, restricted to the part's box (a third
     of the whole contour's box on average, and as exact within it), on the image's grid MAP_COARSENING
     times coarser (a boundary pixel moves by half a pixel), written into the BoundaryDistances' buffer;
     looked up bilinearly, the maps are within a pixel of the exact distances."""
-    points, part_labels, sides = contour_labels.points, contour_labels.labels, contour_labels.sides
+    groups = side_groups(contour_labels)
     if labels is None:
-        labels = set(part_labels[sides == SIDE_A].tolist()) & set(part_labels[sides == SIDE_B].tolist())
-    boxes = {label: part_box(points[part_labels == label], image_size, margin) for label in labels
-             if np.any(part_labels == label)}
-    present = [(label, side) for label in boxes for side in (SIDE_A, SIDE_B)
-               if np.any((part_labels == label) & (sides == side))]
+        labels = {label for label, side in groups if side == SIDE_A} & {label for label, side in groups if side == SIDE_B}
+    boxes = {}
+    for label in labels:
+        own = [pixels for (group_label, _), pixels in groups.items() if group_label == label]
+        if own:
+            boxes[label] = part_box(np.concatenate(own), image_size, margin)
+    present = [(label, side) for label in boxes for side in (SIDE_A, SIDE_B) if (label, side) in groups]
     sizes = [boxes[label][1][0] * boxes[label][1][1] for label, _ in present]
     spans = [-(-size // MAP_ALIGNMENT) * MAP_ALIGNMENT for size in sizes]   # each map aligned in the buffer
     buffer = (arena or MapArena(sum(spans))).take(sum(spans))
     maps, widths, offsets, side_pixels = {}, {}, {}, {}
     for (label, side), size, offset in zip(present, sizes, np.cumsum([0] + spans)):
-        pixels = points[(part_labels == label) & (sides == side)] - boxes[label][0]
-        boundary = np.ones(boxes[label][1], np.uint8)
-        boundary[pixels[:, 1] // MAP_COARSENING, pixels[:, 0] // MAP_COARSENING] = 0
+        pixels = groups[(label, side)] - boxes[label][0]
+        boundary = np.zeros(boxes[label][1], np.uint8)
+        boundary[pixels[:, 1] // MAP_COARSENING, pixels[:, 0] // MAP_COARSENING] = 1
         offsets[(label, side)] = int(offset)
         maps[(label, side)] = buffer[offset:offset + size].reshape(boxes[label][1])
-        cv2.distanceTransform(boundary, cv2.DIST_L2, cv2.DIST_MASK_PRECISE, dst=maps[(label, side)])
-        maps[(label, side)] *= MAP_COARSENING
+        exact_distances(boundary, maps[(label, side)], MAP_COARSENING)
         side_pixels[(label, side)] = pixels
     for label in boxes:
         if (label, SIDE_A) in maps and (label, SIDE_B) in maps:
@@ -169,6 +171,18 @@ def boundary_distances(contour_labels, image_size, labels=None, margin=MAP_MARGI
             widths[label] = float(max(bilinear(maps[(label, SIDE_B)], a).max(),
                                       bilinear(maps[(label, SIDE_A)], b).max()))
     return BoundaryDistances(maps, {label: box[0] for label, box in boxes.items()}, widths, buffer, offsets)
+
+
+def side_groups(contour_labels):
+    """A ContourLabels' pixels by part and side: {(label, side): (M, 2) [px] (x, y), M > 0}, each group in
+    contour order (one sort of the contour, not a mask over it per part and side)."""
+    part_labels, sides = contour_labels.labels, contour_labels.sides
+    order = np.lexsort((sides, part_labels))
+    grouped_labels, grouped_sides = part_labels[order], sides[order]
+    starts = np.flatnonzero(np.r_[True, (grouped_labels[1:] != grouped_labels[:-1]) | (grouped_sides[1:] != grouped_sides[:-1])])
+    ends = np.r_[starts[1:], len(order)]
+    return {(int(grouped_labels[start]), int(grouped_sides[start])): contour_labels.points[order[start:end]]
+            for start, end in zip(starts, ends) if len(order)}
 
 
 def part_box(pixels, image_size, margin=MAP_MARGIN_PX):
@@ -280,7 +294,7 @@ def outline_of(contour_points, image_size=None, step=OUTLINE_STEP, margin=OUTLIN
         sampled = sampled[(sampled[:, 0] >= EDGE_PX) & (sampled[:, 0] < width - EDGE_PX)
                           & (sampled[:, 1] >= EDGE_PX) & (sampled[:, 1] < height - EDGE_PX)]
     outside = (arena or MapArena(inside.size)).take(inside.size).reshape(inside.shape)
-    cv2.distanceTransform(1 - inside, cv2.DIST_L2, cv2.DIST_MASK_PRECISE, dst=outside)
+    exact_distances(inside, outside)
     return Outline(sampled.astype(float), outside, (int(x0), int(y0)))
 
 
