@@ -187,10 +187,6 @@ class StageSearch:
         self.settings = settings
         self.lengths = lengths
         self.bone_lengths = bone_length_array(lengths)
-        # What a stage's StagePack holds whatever the pose and views, made once (stage_pack: a search's
-        # every start and every compiled_cost made them again).
-        self.fixed_packs = {(stage, priors): self.fixed_pack(stage, priors)
-                            for stage in STAGE_PARAMETERS for priors in (False, True)}
 
     def search(self, stage, parameters, views, assigned, frame):
         """One Nelder–Mead stage over STAGE_PARAMETERS[stage]; (new parameters, StageResult). assigned:
@@ -229,36 +225,30 @@ class StageSearch:
     def stage_pack(self, stage, parameters, views, assigned, priors):
         """The compiled.StagePack of the stage's search from `parameters` (29,) (the start, and the values
         of the parameters it does not search); priors=False leaves the smoothness and limits out."""
-        fixed = self.fixed_packs[(stage, priors)]
-        assigned = [None] * len(views) if assigned is None else assigned
-        points = [a for a in assigned if a is not None and len(a)]
-        targets = self.keypoint_targets(stage, views)
-        parameters = np.asarray(parameters, float)
-        return fixed._replace(
-            base=parameters.copy(), start=parameters[fixed.indices],
-            assigned=np.array([a is not None for a in assigned], np.bool_),
-            points=np.concatenate(points).astype(float) if points else np.zeros((0, 2)),
-            point_view=np.concatenate([np.full(len(a), i) for i, a in enumerate(assigned) if a is not None and len(a)]).astype(np.int64)
-            if points else np.zeros(0, np.int64),
-            keypoint_view=np.array([i for i, joints, _, _ in targets for _ in joints], np.int64),
-            keypoint_joint=np.array([j for _, joints, _, _ in targets for j in joints], np.int64),
-            keypoint_xy=np.concatenate([xy for _, _, xy, _ in targets]) if targets else np.zeros((0, 2)),
-            keypoint_weight=np.concatenate([c for _, _, _, c in targets]) if targets else np.zeros(0))
-
-    def fixed_pack(self, stage, priors):
-        """A StagePack of the stage with its pose- and view-dependent fields empty (stage_pack fills them)."""
         settings = self.settings
         names = STAGE_PARAMETERS[stage]
+        indices = np.array(stage_indices(stage), np.int64)
         steps = np.array([settings.step_position if name.endswith(('_x', '_y', '_z')) else settings.step_angle
                           for name in names])
         limits = np.array([JOINT_LIMITS.get(name, (-np.inf, np.inf)) for name in names], float)
         mine = STAGE_CAPSULE_INDEX[stage]
+        assigned = [None] * len(views) if assigned is None else assigned
+        points = [a for a in assigned if a is not None and len(a)]
+        targets = self.keypoint_targets(stage, views)
         bones = STAGE_BONES[stage]
         return StagePack(
-            np.array(stage_indices(stage), np.int64), None, None, steps, limits[:, 0].copy(), limits[:, 1].copy(),
-            mine.astype(np.int64), CAPSULE_RADIUS[mine], CAPSULE_TERMINAL[mine], None, None, None,
+            indices, np.asarray(parameters, float).copy(), np.asarray(parameters, float)[indices].copy(), steps,
+            limits[:, 0].copy(), limits[:, 1].copy(), mine.astype(np.int64), CAPSULE_RADIUS[mine],
+            CAPSULE_TERMINAL[mine], np.array([a is not None for a in assigned], np.bool_),
+            np.concatenate(points).astype(float) if points else np.zeros((0, 2)),
+            np.concatenate([np.full(len(a), i) for i, a in enumerate(assigned) if a is not None and len(a)]).astype(np.int64)
+            if points else np.zeros(0, np.int64),
             np.array([BONE_INDEX[name] for name, _ in bones], np.int64),
-            np.array([LABEL_SLOT[label] for _, label in bones], np.int64), None, None, None, None,
+            np.array([LABEL_SLOT[label] for _, label in bones], np.int64),
+            np.array([i for i, joints, _, _ in targets for _ in joints], np.int64),
+            np.array([j for _, joints, _, _ in targets for j in joints], np.int64),
+            np.concatenate([xy for _, _, xy, _ in targets]) if targets else np.zeros((0, 2)),
+            np.concatenate([c for _, _, _, c in targets]) if targets else np.zeros(0),
             *twist_arrays(stage),
             np.array([settings.enclosure_weight, settings.outline_weight, settings.inside_weight, settings.outline_scale,
                       settings.outline_gate, settings.boundary_weight, settings.keypoint_weight, settings.keypoint_scale,
