@@ -1,4 +1,4 @@
-"""The fitter's exact Euclidean distance transform (fitting/distance_transform.py) against brute force,
+"""The fitter's exact Euclidean distance transform (fitting/objective.py, exact_distances) against brute force,
 and beside OpenCV's DIST_MASK_PRECISE, on seeded random maps.
 
 Speed (not asserted; `./mvpose bench` gives the figures in the graph): on the demo walk's maps (three
@@ -9,7 +9,7 @@ import cv2
 import numpy as np
 import pytest
 
-from mvpose_nodes.fitting.distance_transform import exact_distances
+from mvpose_nodes.fitting.objective import exact_distances
 
 pytestmark = pytest.mark.pure
 
