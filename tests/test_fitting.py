@@ -211,6 +211,23 @@ def test_the_subjects_known_bone_lengths_are_kept_and_fit_closer(cmu_walk):
     assert errors['given'] < errors['measured'], errors
 
 
+def test_lengths_known_in_part_are_kept_and_the_others_measured(cmu_walk):
+    """SkeletonFitter(known_lengths=...) (as `eval suite --true-lengths upper_arm forearm` does) fits with those
+    lengths from the first frame set on and measures the others as a fitter knowing none measures them."""
+    motion = cmu_walk.placed()
+    cameras = studio_rig(cameras=[3, 5, 7])
+    known = {'upper_arm': 0.123, 'forearm': 0.456}
+    partly, measured = SkeletonFitter(known_lengths=known), SkeletonFitter()
+    for frame in range(4):
+        for fitter in (partly, measured):
+            fitter.fit(frame / 25.0, exact_views(cameras, motion.joints[frame]))
+        assert {key: partly.lengths[key] for key in known} == known
+        assert partly.stages.lengths == partly.lengths
+        assert {key: value for key, value in partly.lengths.items() if key not in known} == \
+            {key: value for key, value in measured.lengths.items() if key not in known}
+    assert measured.lengths['upper_arm'] != known['upper_arm']
+
+
 def test_the_person_is_measured_on_the_upright_frame_sets(cmu_walk):
     """A start crouched (upper body 0.3 m lower, knees bent) measures the person too small; the lengths
     then come from the frame sets where they stand at full height, as an upright start gives them (the legs

@@ -81,9 +81,11 @@ class SkeletonFitter:
     """Frame-by-frame fitting: `fit(stamp_s, views) -> Fit`, keeping the pose and the person's size.
     settings: FitterSettings (default: the measured defaults); lengths: the person's bone lengths
     {length key (kinematics.LENGTH_FRACTIONS): [m]} when known beforehand, else None: measured at the
-    first initialisation and on the upright frame sets after it (measure), afresh when time goes back."""
+    first initialisation and on the upright frame sets after it (measure), afresh when time goes back;
+    known_lengths: {length key: [m]} of some of them known beforehand, the others measured (a diagnosis:
+    `eval suite --true-lengths KEY …` shows what measuring those costs)."""
 
-    def __init__(self, settings=None, lengths=None, threads=1):
+    def __init__(self, settings=None, lengths=None, threads=1, known_lengths=None):
         self.settings = settings or FitterSettings()
         # The hypotheses' fits are independent of one another and spend most of their time in the compiled
         # search, which releases the GIL: with threads > 1 they run side by side (the same results); so do a
@@ -92,6 +94,7 @@ class SkeletonFitter:
         self.pool = ThreadPoolExecutor(threads, thread_name_prefix=HYPOTHESES_POOL,
                                        initializer=lambda: setattr(self.local, 'worker', True)) if threads > 1 else None
         self.lengths = None if lengths is None else dict(lengths)
+        self.known_lengths = dict(known_lengths or {})
         # The person's measurements on upright frame sets (measure), while the lengths are not given.
         self.measurements = [] if lengths is None else None
         self.last_stamp = None
@@ -410,7 +413,12 @@ class SkeletonFitter:
             return
         self.measurements.append(person_lengths(measured, self.settings))
         standing = tallest_measurements(self.measurements, spread)
-        self.lengths = {key: float(np.median([m[key] for m in standing])) for key in standing[0]}
+        self.use_measured({key: float(np.median([m[key] for m in standing])) for key in standing[0]})
+
+    def use_measured(self, lengths):
+        """Fit with the measured bone `lengths` {length key: [m]}, those in known_lengths replaced by their
+        known values."""
+        self.lengths = {**lengths, **self.known_lengths}
         self.stages = StageSearch(self.settings, self.lengths)
 
     def initial_parameters(self, views, found):
@@ -422,8 +430,7 @@ class SkeletonFitter:
             return None
         self.start_labels = labelled_joints(views, found, self.settings)
         if self.lengths is None:  # measured whatever the posture, until an upright frame set measures better
-            self.lengths = person_lengths(found, self.settings)
-            self.stages = StageSearch(self.settings, self.lengths)
+            self.use_measured(person_lengths(found, self.settings))
         return inverse_kinematics(completed_joints(self.start_labels, self.lengths))
 
 

@@ -49,11 +49,11 @@ class PreparedSet:
 class FrameSetFitter:
     """The skeleton fitter behind the node: `settings` (fitting.settings.FitterSettings), the configured
     camera numbers, the StageClock that counts the CPU of its stages ('conversion', 'distance maps',
-    'fit'), the person's bone lengths if known (SkeletonFitter's `lengths`) and the threads that fit its
-    hypotheses (SkeletonFitter's `threads`)."""
+    'fit'), the person's bone lengths if known (SkeletonFitter's `lengths`, or some of them: `known_lengths`)
+    and the threads that fit its hypotheses (SkeletonFitter's `threads`)."""
 
-    def __init__(self, settings, cameras, clock=None, lengths=None, threads=1):
-        self.fitter = SkeletonFitter(settings, lengths, threads)
+    def __init__(self, settings, cameras, clock=None, lengths=None, threads=1, known_lengths=None):
+        self.fitter = SkeletonFitter(settings, lengths, threads, known_lengths)
         self.cameras = list(cameras)
         self.clock = clock or StageClock()
 

@@ -29,6 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from mvpose_nodes.app.suite.features import case_features, case_motion, placed_window, render_camera
+from mvpose_nodes.body.kinematics import LENGTH_FRACTIONS
 from mvpose_nodes.tools.cli import ArgumentParser, UserError, end_with_parent, exit_on_user_error
 
 SWAP_GRACE_FRAMES = 10   # the first frames of a case may still be sorting left from right (issue 13's target)
@@ -49,9 +50,10 @@ def build_parser(prog):
                         help='run only these cases of the draw (as numbered in the table), e.g. to look at one again')
     parser.add_argument('--resolution', default='1920x1080', help='WIDTHxHEIGHT (default 1920x1080)')
     parser.add_argument('-j', '--jobs', type=int, default=2, help='cases rendered and fitted at once (default 2)')
-    parser.add_argument('--true-lengths', action='store_true',
+    parser.add_argument('--true-lengths', nargs='*', choices=list(LENGTH_FRACTIONS), metavar='KEY',
                         help="diagnosis: fit with the person's true bone lengths (from the motion) instead of "
-                             'measuring them, to see how much of the error the measurement of the person costs')
+                             'measuring them, to see how much of the error the measurement of the person costs; '
+                             f"with KEYs ({', '.join(LENGTH_FRACTIONS)}) only those, the others measured")
     parser.add_argument('--gaps', type=int, nargs='+', metavar='G',
                         help='fit only some frame sets, as the skeleton_fitter does at `bag play` speed when it '
                              'cannot keep up: each next one G frame sets on, G drawn per step (seeded by the '
@@ -127,7 +129,8 @@ def main(argv=None, prog='eval suite'):
                 raise UserError(f'--only takes case numbers 0..{len(cases) - 1} of the --cases {len(cases)} drawn')
             cases = [cases[index] for index in args.only]
         print(f'[suite] {len(cases)} cases × {args.frames} frame sets, seed {args.seed}, {args.jobs} at once'
-              + (", the fitter given the true bone lengths (--true-lengths)" if args.true_lengths else '')
+              + (f", the fitter given the true {' and '.join(args.true_lengths) or 'bone'} lengths (--true-lengths)"
+                 if args.true_lengths is not None else '')
               + (f", the fitter given one frame set in every {' or '.join(map(str, sorted(set(args.gaps))))} "
                  '(--gaps)' if args.gaps else ''),
               file=sys.stderr, flush=True)
@@ -185,9 +188,10 @@ class CaseResult:
         return self.errors.mean(axis=1)
 
 
-def run_case(case, true_lengths=False, features_cache=None, gaps=None):
-    """Render, extract and fit the frame sets of a case; its CaseResult. true_lengths: the fitter is given
-    the motion's bone lengths instead of measuring the person; features_cache: a folder for the case's
+def run_case(case, true_lengths=None, features_cache=None, gaps=None):
+    """Render, extract and fit the frame sets of a case; its CaseResult. true_lengths: None to measure the
+    person, [] to give the fitter the motion's bone lengths instead, or length keys (kinematics.LENGTH_FRACTIONS)
+    to give it those of them, the others measured; features_cache: a folder for the case's
     feature messages (case_features), or None; gaps: None to fit every frame set, else the steps [frame
     sets] to draw from (rng seeded by case.seed) from one fitted frame set to the next, the first fitted."""
     from mvpose_nodes.body.kinematics import lengths_of
@@ -197,8 +201,9 @@ def run_case(case, true_lengths=False, features_cache=None, gaps=None):
 
     motion = case_motion(case)
     cameras = {c.number: c for c in case.rig if c.number in case.cameras}
-    fitting = FrameSetFitter(FitterSettings(), case.cameras,
-                             lengths=lengths_of(motion.joints) if true_lengths else None)
+    true = lengths_of(motion.joints)
+    fitting = FrameSetFitter(FitterSettings(), case.cameras, lengths=true if true_lengths == [] else None,
+                             known_lengths={key: true[key] for key in true_lengths or ()})
     count = len(motion.joints)
     joints = np.full((count, 15, 3), np.nan)
     statuses, seconds = [None] * count, []
