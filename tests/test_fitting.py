@@ -286,6 +286,31 @@ def test_a_person_seen_seated_first_is_measured_again_once_standing(cmu_walk):
     assert seated_first.lengths == pytest.approx(standing_only.lengths, rel=0.01)
 
 
+def test_one_frame_set_with_the_hands_taken_for_the_head_does_not_measure_the_person(cmu_walk):
+    """Hands raised over the head with the wrists unseen: the head keypoint is the hands' top and the root and
+    neck keypoints rise with the arms (the suite's seed 107 case 5, frame set 8: head 0.41 m, neck 0.26 m,
+    pelvis 0.19 m above the truth), which `upright` cannot tell from a taller person standing. Measured among
+    upright frame sets of the walk, that one measurement is the tallest but no other measures near it
+    (stature_support), so the lengths stay those of the walk alone (within 1 %); taken as the tallest, it had
+    made the person 25 % taller."""
+    motion = cmu_walk.placed()
+    names = ('pelvis', 'neck', 'head', 'left_ankle', 'right_ankle')
+    lifted = {'head': 0.41, 'neck': 0.26, 'pelvis': 0.19}
+
+    def triangulated(frame, raised=False):
+        return {name: motion.joints[frame][JOINT_NAMES.index(name)] + [0, 0, lifted.get(name, 0) if raised else 0]
+                for name in names}
+
+    assert upright(triangulated(3, raised=True), FitterSettings())
+    with_raised, walk_only = SkeletonFitter(), SkeletonFitter()
+    for frame in range(12):
+        with_raised.measure(triangulated(frame, raised=frame == 3))
+        if frame != 3:
+            walk_only.measure(triangulated(frame))
+    assert stature(with_raised.lengths) == pytest.approx(stature(walk_only.lengths), rel=0.01)
+    assert stature(with_raised.lengths) < 1.1 * stature(lengths_of(motion.joints))
+
+
 def test_with_the_hands_raised_the_root_and_neck_are_put_below_the_head():
     """Raised arms lift the silhouettes' centroid (the root keypoint) and the row where the silhouette widens
     below the head (the neck keypoint): with a wrist above the neck and a foot on the floor, the triangulated

@@ -402,8 +402,8 @@ class SkeletonFitter:
         up to 270 mm above it with the arms raised (session 29), and the legs measured from it as much too
         short or too long. Upright is either pelvis's verdict: the fit's alone would never measure again after
         a start crouched (its short lengths keep the fits low), the root's alone not one whose centroid is off."""
-        spread, enough = self.settings.stature_spread, self.settings.length_frames
-        if self.measurements is None or len(tallest_measurements(self.measurements, spread)) >= enough:
+        spread, enough, support = self.settings.stature_spread, self.settings.length_frames, self.settings.stature_support
+        if self.measurements is None or len(tallest_measurements(self.measurements, spread, support)) >= enough:
             return
         measured = joints
         if self.given is not None:
@@ -412,7 +412,7 @@ class SkeletonFitter:
         if not (upright(measured, self.settings) or upright(joints, self.settings)):
             return
         self.measurements.append(person_lengths(measured, self.settings))
-        standing = tallest_measurements(self.measurements, spread)
+        standing = tallest_measurements(self.measurements, spread, support)
         self.use_measured({key: float(np.median([m[key] for m in standing])) for key in standing[0]})
 
     def use_measured(self, lengths):

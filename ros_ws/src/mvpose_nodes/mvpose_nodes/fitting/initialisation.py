@@ -257,13 +257,22 @@ def stature(lengths):
     return lengths['spine'] / LENGTH_FRACTIONS['spine']
 
 
-def tallest_measurements(measurements, spread):
+def tallest_measurements(measurements, spread, support=1):
     """The bone lengths {key: [m]} among `measurements` (person_lengths, a list) whose stature is within the share
-    `spread` of the tallest's (settings.stature_spread); [] for none."""
+    `spread` of the tallest (settings.stature_spread) that `support` of them (itself among them) measure within
+    `spread` of it (settings.stature_support), or while none is, the one the most measure so; [] for none. The
+    tallest, since crouching, sitting or bending measures a person shorter; but a frame set whose raised hands
+    are taken for the top of the head (the wrists unseen, so that `upright` cannot tell) measures them taller,
+    and one such measurement alone had set a 1.59 m person's lengths for 1.99 m (docs/method.md, session 70)."""
     if not measurements:
         return []
-    tallest = max(stature(m) for m in measurements)
-    return [m for m in measurements if stature(m) >= (1 - spread) * tallest]
+    statures = np.array([stature(m) for m in measurements])
+    near = np.abs(statures[None, :] - statures[:, None]) <= spread * statures[:, None]
+    counts = near.sum(axis=1)
+    supported = counts >= min(support, counts.max())
+    reference = statures[supported].max()
+    return [m for m, height in zip(measurements, statures)
+            if (1 - spread) * reference <= height <= (1 + spread) * reference]
 
 
 def person_lengths(joints, settings):

@@ -70,6 +70,9 @@ class FitterSettings:
               'share of the height', 0.0, 1.0)
     stature_spread: float = setting(
         0.05, 'measurements of a stature more than this share below the tallest measured are left out', 0.0, 1.0)
+    stature_support: int = setting(
+        3, 'the tallest measured is the tallest stature that this many measurements (itself among them) measure '
+           'within stature_spread of it (initialisation.tallest_measurements): not one frame set alone', 1, 10000)
     face_evidence: float = setting(
         0.2, "the sum over the views of (frontness − the views' mean) × the unit vector towards the camera "
              'needed to trust the face (initialisation.facing_right)', 0.0, 10.0)
