@@ -69,7 +69,8 @@ class FitterSettings:
         0.15, "... and the pelvis's height above the floor is within this share of the template's (standing) "
               'share of the height', 0.0, 1.0)
     stature_spread: float = setting(
-        0.05, 'measurements of a stature more than this share below the tallest measured are left out', 0.0, 1.0)
+        0.05, 'measurements of a stature more than this share below (or above) the tallest measured (stature_support) '
+              'are left out', 0.0, 1.0)
     stature_support: int = setting(
         3, 'the tallest measured is the tallest stature that this many measurements (itself among them) measure '
            'within stature_spread of it (initialisation.tallest_measurements): not one frame set alone', 1, 10000)
