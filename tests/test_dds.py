@@ -174,7 +174,7 @@ def test_a_node_that_hangs_after_ctrl_c_still_exits(tmp_path, hang_in):
 
 
 TEARDOWN_SCRIPT = '''
-import sys, time
+import ctypes, sys, time
 from mvpose_nodes.ros import helpers
 helpers.STOP_LIMIT = 1.0
 
@@ -183,6 +183,8 @@ class Node:
     def destroy_node(self):
         if sys.argv[1] == 'hang':   # as rclpy's destroy_node once did after `topic echo --count 5` had printed
             time.sleep(600)
+        elif sys.argv[1] == 'hang holding the GIL':   # ... and did so again where no Python thread could run
+            ctypes.PyDLL(None).sleep(600)
 
 
 print('the work done', flush=True)
@@ -192,21 +194,26 @@ print(f'returned {code} after {time.monotonic() - started:.1f} s')
 '''
 
 
-@pytest.mark.parametrize('hang', ['hang', 'no hang'])
+@pytest.mark.parametrize('hang', ['hang', 'hang holding the GIL', 'no hang'])
 def test_a_tool_that_hangs_in_its_teardown_still_exits_with_its_result(tmp_path, hang):
     """destroy_or_exit: a command-line tool whose work is done and whose node's destroy_node hangs says so and
-    ends with the tool's exit code STOP_LIMIT later; one that does not hang returns that code at once."""
+    ends with the tool's exit code STOP_LIMIT later; where the hang holds the GIL (no Python thread runs), the
+    stacks are printed and the C library's timer ends it with that code; one that does not hang returns that
+    code at once."""
     script = tmp_path / 'teardown.py'
     script.write_text(TEARDOWN_SCRIPT)
     result = run_mvpose('exec', 'python', script, hang, timeout=30, check=False)
-    assert result.returncode == 3 if hang == 'hang' else result.returncode == 0, result
+    assert result.returncode == (0 if hang == 'no hang' else 3), result
     assert result.stdout.startswith('the work done\n'), result.stdout
     if hang == 'hang':
         assert ('topic echo: still running 1 s after its work was done (hung in rclpy); exiting without cleaning up'
                 in result.stderr), result.stderr
-        assert 'returned' not in result.stdout
-    else:
+    if hang == 'hang holding the GIL':
+        assert 'still running' not in result.stderr and 'in destroy_node' in result.stderr, result.stderr
+    if hang == 'no hang':
         assert 'returned 3 after 0.0 s' in result.stdout and 'still running' not in result.stderr, result
+    else:
+        assert 'returned' not in result.stdout
 
 
 def test_rate_statistics_are_over_the_intervals_between_consecutive_arrivals():

@@ -1,5 +1,6 @@
 """rclpy helpers shared by the nodes and tools: the Jazzy run pattern, QoS conversions, graph look-ups."""
 import ctypes
+import faulthandler
 import os
 import re
 import select
@@ -27,6 +28,10 @@ SPIN_PERIOD = 0.1  # [s] the longest a node takes to see a shutdown
 # Shorter than the 5 s a launcher gives a node after SIGINT before it sends SIGTERM (`launch --sigint-timeout`,
 # as ros2 launch's), so that such a hang still ends as a clean stop.
 STOP_LIMIT = 3.0
+# [s] past STOP_LIMIT, when a tool's teardown hung where no Python thread can run: faulthandler prints the
+# stacks at half of this, the exit timer ends the process at all of it (destroy_or_exit).
+EXIT_TIMER_DELAY = 1.0
+SIGEV_THREAD, CLOCK_MONOTONIC = 2, 1   # signal.h and time.h (Linux)
 # glibc's malloc (see keep_freed_memory): buffers up to this size come from the heap rather than mmap, and
 # freed memory up to the trim threshold stays in the process. 64 MB is above any one frame's buffer (a 1080p
 # RGB image is 6 MB, a frame set's distance maps about 17 MB).
@@ -122,18 +127,57 @@ def watch_stop(context, name):
 
 
 def destroy_or_exit(node, name, code):
-    """node.destroy_node() for a command-line tool whose work is done, which then returns `code`; if rclpy hangs
-    in it (STOP_LIMIT: a `topic echo --count 5` printed its five messages and hung so in a full test run, session
-    42), the process says so STOP_LIMIT seconds later and ends with `code` all the same."""
-    done = threading.Event()
-
-    def watch():
-        if not done.wait(STOP_LIMIT):
-            abandon(name, 'its work was done', code)
-    threading.Thread(target=watch, name='teardown watchdog', daemon=True).start()
+    """node.destroy_node() for a command-line tool whose work is done, which then returns `code`; if the process
+    has not ended STOP_LIMIT seconds later (rclpy hung in destroy_node, in its shutdown or in the middleware's
+    threads at the interpreter's exit), it says so and ends with `code` all the same. A Python thread watches
+    and says so while the interpreter can run it; but rclpy has hung in destroy_node holding the GIL (a `topic
+    echo --count 5` that had printed its five messages, sessions 42 and 70), and then no Python thread runs:
+    for that a POSIX timer (exit_timer) ends the process EXIT_TIMER_DELAY later, after faulthandler, which
+    needs no GIL either, has printed every thread's stack."""
+    threading.Thread(target=lambda: (time.sleep(STOP_LIMIT), abandon(name, 'its work was done', code)),
+                     name='teardown watchdog', daemon=True).start()
+    faulthandler.dump_traceback_later(STOP_LIMIT + EXIT_TIMER_DELAY / 2)
+    exit_timer(STOP_LIMIT + EXIT_TIMER_DELAY, code)
     node.destroy_node()
-    done.set()
     return code
+
+
+def exit_timer(seconds, code):
+    """End this process with exit status `code` `seconds` from now, whatever its threads do: a POSIX timer
+    (timer_create, SIGEV_THREAD) whose expiry starts a thread of the C library's that calls _exit(code), so it
+    needs neither the GIL nor a running interpreter. The timer's argument, a union sigval, is passed as _exit's
+    int (in a register on x86-64 and aarch64, the ABIs of the ROS 2 wheels). Where the C library has no
+    timer_create, nothing is armed."""
+    libc = ctypes.CDLL(None, use_errno=True)
+    if not hasattr(libc, 'timer_create'):
+        return
+    event = _SignalEvent(value=code, notify=SIGEV_THREAD,
+                         function=ctypes.cast(libc._exit, ctypes.c_void_p).value)
+    timer = ctypes.c_void_p()
+    if libc.timer_create(CLOCK_MONOTONIC, ctypes.byref(event), ctypes.byref(timer)) != 0:
+        raise OSError(ctypes.get_errno(), f'timer_create: {os.strerror(ctypes.get_errno())}')
+    whole = int(seconds)
+    expiry = _TimerSpec(value=_TimeSpec(whole, int((seconds - whole) * 1e9)))
+    libc.timer_settime.argtypes = (ctypes.c_void_p, ctypes.c_int, ctypes.c_void_p, ctypes.c_void_p)
+    if libc.timer_settime(timer, 0, ctypes.byref(expiry), None) != 0:
+        raise OSError(ctypes.get_errno(), f'timer_settime: {os.strerror(ctypes.get_errno())}')
+
+
+class _TimeSpec(ctypes.Structure):
+    """struct timespec (time.h)."""
+    _fields_ = [('seconds', ctypes.c_long), ('nanoseconds', ctypes.c_long)]
+
+
+class _TimerSpec(ctypes.Structure):
+    """struct itimerspec (time.h): no interval, one expiry `value` from now."""
+    _fields_ = [('interval', _TimeSpec), ('value', _TimeSpec)]
+
+
+class _SignalEvent(ctypes.Structure):
+    """struct sigevent (signal.h, glibc and musl on Linux: 64 bytes) for SIGEV_THREAD: `function` called with
+    `value` on a new thread."""
+    _fields_ = [('value', ctypes.c_void_p), ('signal', ctypes.c_int), ('notify', ctypes.c_int),
+                ('function', ctypes.c_void_p), ('attributes', ctypes.c_void_p), ('padding', ctypes.c_int * 8)]
 
 
 def abandon(name, after, code=0):
