@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from common import rendered_views
 
-from mvpose_nodes.body.model import JOINT_NAMES, PARAMETER_NAMES
+from mvpose_nodes.body.model import JOINT_INDEX, JOINT_NAMES, PARAMETER_NAMES
 from mvpose_nodes.body.camera import studio_rig
 from mvpose_nodes.body.kinematics import bone_lengths, forward_kinematics, lengths_of
 from mvpose_nodes.fitting.fitter import SkeletonFitter
@@ -157,6 +157,32 @@ def test_limb_tracks_keep_the_sides_through_a_walk_whatever_the_triangulations_o
                           for limb in ('knee', 'ankle', 'elbow', 'wrist')])
         wrong = np.array(wrong)
         assert wrong.all() if start_wrong else not wrong.any(), (start_wrong, np.flatnonzero(wrong.any(axis=1)))
+
+
+@pytest.mark.parametrize('speed', [0.2, 1.3, 3.5])
+def test_the_legs_are_carried_on_at_the_fits_velocity_while_walking_only(cmu_walk, speed):
+    """LimbTracks.carried_legs: with the pelvis at a walker's speed (standing_speed to running_speed) the knees
+    and ankles where the last two fits' velocity puts them at the next frame set, each leg at its own velocity
+    (a swinging foot on, a planted one still); none standing or running, nor before two fits."""
+    from mvpose_nodes.fitting.limb_sides import LEG_JOINTS, LimbTracks
+    settings = FitterSettings()
+    first = cmu_walk.placed().joints[0]
+    moved = first + [speed * 0.04, 0.0, 0.0]   # the whole body a frame period on at `speed` [m/s] ...
+    moved[JOINT_INDEX['left_ankle']] += [0.05, 0.0, 0.02]   # ... and the left foot swinging faster, rising
+    moved[JOINT_INDEX['right_ankle']] = first[JOINT_INDEX['right_ankle']]   # the right one planted
+    tracks = LimbTracks(settings)
+    tracks.append(0.0, first)
+    assert tracks.carried_legs(0.04) is None
+    tracks.append(0.04, moved)
+    carried = tracks.carried_legs(0.08)
+    if not settings.standing_speed <= speed < settings.running_speed:
+        assert carried is None
+        return
+    assert set(carried) == set(LEG_JOINTS)
+    for name in LEG_JOINTS:
+        index = JOINT_INDEX[name]
+        assert carried[name] == pytest.approx(2 * moved[index] - first[index])
+    assert carried['right_ankle'] == pytest.approx(first[JOINT_INDEX['right_ankle']])
 
 
 def test_the_face_the_views_see_labels_the_start(cmu_walk):

@@ -267,12 +267,15 @@ class SkeletonFitter:
                 track.limbs.label(stamp, labelled)
         elif found is not None:   # a start: the pairs as initial_parameters labelled them
             labelled = self.start_labels
-        last = None
+        last = carried = None
         # After a gap the last fit's limbs are half a stride away: the frame's triangulated ones are nearer.
         if track.limbs.after_gap(stamp) and labelled is not None:
             parameters, last = self.triangulated_limbs(parameters, labelled), parameters
+        elif track.limbs.history:
+            carried = track.limbs.carried_legs(stamp)
         stale = track.limbs.after_gap(stamp, self.settings.outline_horizon)
-        track.parameters, track.results = self.search_stages(parameters, views, labelled, canonical, last, stale)
+        track.parameters, track.results = self.search_stages(parameters, views, labelled, canonical, last, stale,
+                                                             carried=carried)
         track.joints, _ = forward_kinematics(track.parameters, self.lengths)
         track.limbs.append(stamp, track.joints)
 
@@ -307,14 +310,15 @@ class SkeletonFitter:
                                                              self.settings.ankle_height)
         return cost
 
-    def search_stages(self, parameters, views, found, canonical=False, last=None, stale=False, kept=None):
+    def search_stages(self, parameters, views, found, canonical=False, last=None, stale=False, kept=None, carried=None):
         """The six stages of paper 000 Sec. 5.1 from `parameters` (29,); each stage after the torso's searched
         also from the frame's triangulated joints `found` ({joint: (3,)} or None) and, with `canonical` (a
         start), the torso also from its pose turned by TORSO_START_YAWS and each limb stage from the
         canonical limb poses (limb_starts.py), the best result kept (Sec. 5.3). `last`: the last fit's
         parameters when `parameters` are already the triangulated limbs (a gap over velocity_horizon);
         `stale`: the last fit is over outline_horizon old; `kept`: {stage: StageResult} of stages not
-        searched, `parameters` already their fit. Returns the fitted parameters and the
+        searched, `parameters` already their fit; `carried`: knees and ankles {name: (3,)} carried on from the
+        last fits (LimbTracks.carried_legs), the leg stages also searched from them. Returns the fitted parameters and the
         stage_search.StageResults."""
         reference, _ = forward_kinematics(parameters, self.lengths)
         if found is not None:
@@ -343,7 +347,7 @@ class SkeletonFitter:
                 searched, result = self.stages.search(stage, parameters, oriented, assigned, frame)
             else:
                 if alternatives is None:   # starts relative to the fitted torso
-                    alternatives = self.alternative_starts(parameters, found, canonical, last)
+                    alternatives = self.alternative_starts(parameters, found, canonical, last, carried)
                 def search_from(start):
                     if start is None:
                         return self.stages.search(stage, parameters, oriented, assigned, frame)
@@ -362,11 +366,12 @@ class SkeletonFitter:
             results.append(result)
         return parameters, results
 
-    def alternative_starts(self, parameters, found, canonical, last=None):
+    def alternative_starts(self, parameters, found, canonical, last=None, carried=None):
         """{stage: [parameters (29,), ...]} to search each stage after the torso's from, besides `parameters`:
         the limbs' triangulated joints `found` as angles relative to the fitted torso (or, when `parameters`
-        already has them, `last`: the last fit's limbs), and with `canonical` the canonical limb poses
-        (limb_starts.limb_start_joints) for the limb stages."""
+        already has them, `last`: the last fit's limbs), with `canonical` the canonical limb poses
+        (limb_starts.limb_start_joints) for the limb stages, and for the leg stages the knees and ankles
+        `carried` on from the last fits, relative to the fitted torso too."""
         starts = {stage: [] for stage in STAGE_NAMES[1:]}
         if found is not None:
             candidate = self.triangulated_limbs(parameters, found) if last is None else last
@@ -379,6 +384,10 @@ class SkeletonFitter:
                 for candidate in map(inverse_kinematics, posed):
                     for stage in stages:
                         starts[stage].append(candidate)
+        if carried is not None:
+            candidate = self.triangulated_limbs(parameters, carried)
+            for stage in ('left_leg', 'right_leg'):
+                starts[stage].append(candidate)
         return starts
 
     def triangulated_limbs(self, parameters, found):

@@ -16,6 +16,7 @@ from mvpose_nodes.fitting.objective import segment_points
 from mvpose_nodes.fitting.stage_search import STAGE_BONES
 
 SWAPPABLE = {'legs': ('knee', 'ankle'), 'arms': ('elbow', 'wrist')}
+LEG_JOINTS = tuple(f'{side}_{name}' for side in ('left', 'right') for name in SWAPPABLE['legs'])
 # The legs' labelled bones (thigh, shin) by part label, as the leg stages have them (stage_search.STAGE_BONES),
 # and the points per bone that say which labelled leg's part it lies on (legs_on_other_labels).
 LEG_BONES = {label: [name for name, _ in STAGE_BONES[stage]]
@@ -72,6 +73,17 @@ class LimbTracks:
         (t0, p0), (t1, p1) = self.history[0], self.history[-1]
         pelvis = JOINT_INDEX['pelvis']
         return float(np.linalg.norm((p1[pelvis] - p0[pelvis])[:2]) / (t1 - t0))
+
+    def carried_legs(self, stamp):
+        """The knees and ankles {name: (3,) [m]} the last two fits put at `stamp` at constant velocity (predicted)
+        while the pelvis moves as a walker's does (pelvis_speed from standing_speed up to running_speed), else
+        None. A leg's search starts from the last pose moved on with the pelvis, where a swinging foot is a
+        frame period's walk behind and a planted one as far ahead (session 62: the legs' swapped strides)."""
+        speed = self.pelvis_speed()
+        if speed is None or not self.settings.standing_speed <= speed < self.settings.running_speed:
+            return None
+        predicted = self.predicted(stamp)
+        return {name: predicted[JOINT_INDEX[name]] for name in LEG_JOINTS}
 
     def label(self, stamp, found):
         """Exchange, in `found` ({joint: (3,)} triangulated), the pairs nearer the other side's predicted
