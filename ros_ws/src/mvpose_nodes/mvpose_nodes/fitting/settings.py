@@ -131,7 +131,8 @@ class FitterSettings:
         0.05, '[m] the crossing of the knees or of the wrists at which crossed_cost_share applies in full', 1e-3, 1.0)
     standing_speed: float = setting(
         0.5, "[m/s] the knees' crossing is judged while the fit's pelvis moves slower than this over "
-             'walking_baseline (standing, turning on the spot, sitting; a stride is judged by its probes)', 0.0, 100.0)
+             'walking_baseline (standing, turning on the spot, sitting; a stride is judged by its probes); from this '
+             'speed up to running_speed the legs are carried on (running_speed)', 0.0, 100.0)
     running_speed: float = setting(
         2.0, "[m/s] while the fit's pelvis moves at standing_speed or faster but slower than this over walking_baseline "
              '(walking; people change from walking to running at about 2 m/s), the leg stages are also searched from '
