@@ -318,8 +318,8 @@ class SkeletonFitter:
         parameters when `parameters` are already the triangulated limbs (a gap over velocity_horizon);
         `stale`: the last fit is over outline_horizon old; `kept`: {stage: StageResult} of stages not
         searched, `parameters` already their fit; `carried`: knees and ankles {name: (3,)} carried on from the
-        last fits (LimbTracks.carried_legs), the leg stages also searched from them. Returns the fitted parameters and the
-        stage_search.StageResults."""
+        last fits (LimbTracks.carried_legs), the leg stages also searched from them. Returns the fitted
+        parameters and the stage_search.StageResults."""
         reference, _ = forward_kinematics(parameters, self.lengths)
         if found is not None:
             for name, position in found.items():

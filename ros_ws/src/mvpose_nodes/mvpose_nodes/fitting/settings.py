@@ -134,11 +134,12 @@ class FitterSettings:
              'walking_baseline (standing, turning on the spot, sitting; a stride is judged by its probes); from this '
              'speed up to running_speed the legs are carried on (running_speed)', 0.0, 100.0)
     running_speed: float = setting(
-        2.0, "[m/s] while the fit's pelvis moves at standing_speed or faster but slower than this over walking_baseline "
-             '(walking; people change from walking to running at about 2 m/s), the leg stages are also searched from '
-             'the knees and ankles carried on from the last two fits at their velocity (a swinging foot moves at about '
-             "twice the walker's speed, a planted one not at all); not running (a runner's swinging foot turns within "
-             'a frame period or two) nor after a gap over velocity_horizon (LimbTracks.carried_legs)', 0.0, 100.0)
+        2.0, "[m/s] while the fit's pelvis moves at standing_speed or faster but slower than this over "
+             'walking_baseline (walking; people change from walking to running at about 2 m/s), the leg stages are '
+             'also searched from the knees and ankles carried on from the last two fits at their velocity (a swinging '
+             "foot moves at about twice the walker's speed, a planted one not at all); not running (a runner's "
+             'swinging foot turns within a frame period or two) nor after a gap over velocity_horizon '
+             '(LimbTracks.carried_legs)', 0.0, 100.0)
     foot_weight: float = setting(
         1.0, 'per px² of a point of a foot, ahead of the ankle where the hips face, outside the silhouette, added to '
              "a labelling's cost when labellings are compared (hypotheses.feet_outside; 0: the feet are not asked)",
