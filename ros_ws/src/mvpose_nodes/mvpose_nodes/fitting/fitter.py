@@ -267,12 +267,12 @@ class SkeletonFitter:
                 track.limbs.label(stamp, labelled)
         elif found is not None:   # a start: the pairs as initial_parameters labelled them
             labelled = self.start_labels
-        last = carried = None
+        last = None
         # After a gap the last fit's limbs are half a stride away: the frame's triangulated ones are nearer.
-        if track.limbs.after_gap(stamp) and labelled is not None:
+        after_gap = track.limbs.after_gap(stamp)
+        if after_gap and labelled is not None:
             parameters, last = self.triangulated_limbs(parameters, labelled), parameters
-        elif track.limbs.history:
-            carried = track.limbs.carried_legs(stamp)
+        carried = None if after_gap else track.limbs.carried_legs(stamp)
         stale = track.limbs.after_gap(stamp, self.settings.outline_horizon)
         track.parameters, track.results = self.search_stages(parameters, views, labelled, canonical, last, stale,
                                                              carried=carried)

@@ -134,8 +134,10 @@ def destroy_or_exit(node, name, code):
     echo --count 5` that had printed its five messages, sessions 42 and 70), and then no Python thread runs:
     for that a POSIX timer (exit_timer) ends the process EXIT_TIMER_DELAY later, after faulthandler, which
     needs no GIL either, has printed every thread's stack."""
-    threading.Thread(target=lambda: (time.sleep(STOP_LIMIT), abandon(name, 'its work was done', code)),
-                     name='teardown watchdog', daemon=True).start()
+    def watch():
+        time.sleep(STOP_LIMIT)
+        abandon(name, 'its work was done', code)
+    threading.Thread(target=watch, name='teardown watchdog', daemon=True).start()
     faulthandler.dump_traceback_later(STOP_LIMIT + EXIT_TIMER_DELAY / 2)
     exit_timer(STOP_LIMIT + EXIT_TIMER_DELAY, code)
     node.destroy_node()
