@@ -125,34 +125,6 @@ def test_a_start_turned_far_off_the_keypoints_yaw_finds_the_torso(walk, monkeypa
         assert error < 10 if searched else error > 25, error
 
 
-def test_a_start_keeps_the_whole_fit_that_explains_the_views_best(standing, monkeypatch):
-    """A start is fitted whole from the keypoints' pose and from it turned by each of TORSO_START_YAWS, and the
-    fit kept is the one whose six stages explain the views best (explaining_cost), within 10 degrees of the
-    truth's line of facing; the face does not enter that choice (read on the back and weighed ten times the
-    cost, the same start is kept): front or back is the hypotheses' to decide, and a face charged there had
-    favoured a pose side on to it (test_the_face_the_views_see_weighs_on_front_and_back failed so)."""
-    face_behind = [replace(view, frontness=1.0 - view.frontness) for view in standing[0][1]]
-    kept = {}
-    for views, settings in ((standing[0][1], FitterSettings()), (face_behind, FitterSettings(face_cost_share=10.0))):
-        fitter = SkeletonFitter(settings)
-        outcomes, started, start = [], [], fitter.start
-        def recorded(*arguments, started_track=fitter.started_track):
-            outcomes.append(started_track(*arguments))
-            return outcomes[-1]
-        monkeypatch.setattr(fitter, 'started_track', recorded)
-        def recorded_start(*arguments):
-            start(*arguments)
-            started.append(fitter.track)
-        monkeypatch.setattr(fitter, 'start', recorded_start)
-        fitter.fit(0.0, views)
-        assert len(outcomes) == 1 + len(fitter_module.TORSO_START_YAWS)
-        costs = [cost for cost, _ in outcomes]
-        assert started[0] is outcomes[int(np.argmin(costs))][1]
-        kept[settings.face_cost_share] = int(np.argmin(costs)), started[0].parameters
-    assert kept[10.0][0] == kept[FitterSettings().face_cost_share][0]
-    assert torso_yaw_error(fitter_module.forward_kinematics(kept[10.0][1], fitter.lengths)[0], standing[0][0]) < 10
-
-
 def swapped_after_wrong_start(frames, pairs, monkeypatch, settings=None):
     """Fit the frames from a start whose triangulated pairs are labelled with `pairs` exchanged (as a start
     without a face to tell gets them): whether the start's own fit has any left/right pair nearer the other

@@ -56,13 +56,12 @@ from mvpose_nodes.vision.contour import SIDE_A, SIDE_B, ContourLabels
 
 TORSO_POSITION = stage_indices('torso')[:3]   # torso_x, torso_y, torso_z: the root's position [m]
 TORSO_YAW = PARAMETER_INDEX['torso_rz']   # the body's turn about the vertical [rad]
-# A start is also fitted from its pose turned about the vertical by each of these [rad] (±45 and ±90 degrees:
-# every line of facing within 22.5 degrees of one start; which way along it, front or back, the hypotheses
-# decide): the facing from the keypoints (initialisation.completed_joints, the limbs' left-to-right offsets) is
-# 40-90 degrees off for a runner or walker mid-stride, whose ankles and wrists lie apart along the way they go
-# (in 20 of the suite's 46 tuning cases of seeds 1-4), and one search does not turn the torso that far. Each
-# is fitted whole and the fit that explains the views best kept (SkeletonFitter.start), not the torso that
-# does: on the suite's features a runner's torso alone was kept 69-75 degrees off (docs/method.md, session 72).
+# A start's torso is also searched from its pose turned about the vertical by each of these [rad] (±45 and
+# ±90 degrees: every line of facing within 22.5 degrees of one start; which way along it, front or back, the
+# hypotheses decide): the facing from the keypoints (initialisation.completed_joints, the limbs' left-to-right
+# offsets) is 40-90 degrees off for a runner or walker mid-stride, whose ankles and wrists lie apart along
+# the way they go (in 20 of the suite's 46 tuning cases of seeds 1-4), and one search does not turn the
+# torso that far (search_stages).
 TORSO_START_YAWS = tuple(np.pi * eighth / 4 for eighth in (-2, -1, 1, 2))
 HAIR_VIEWS = 500   # the person's hair_gap is measured on this many views (400 in a 50-frame case of 8 cameras), no more
 
@@ -191,28 +190,18 @@ class SkeletonFitter:
                    unexplained if self.lost_fits >= settings.lost_frames else 0.0, tuple(v.camera.number for v in views))
 
     def start(self, stamp, views, found):
-        """A (re)start: the pose from the frame's keypoints (initial_parameters), fitted whole from it and from
-        it turned by each of TORSO_START_YAWS, the fit that explains the views best kept (explaining_cost: the
-        line of facing; front or back the hypotheses decide), and every other labelling of it
-        (hypotheses.START_LABELLINGS) fitted beside it, to be compared over the next hypothesis_frames frame
-        sets. ValueError when the keypoints are too few to start from."""
+        """A (re)start: the pose from the frame's keypoints (initial_parameters), fitted, and every other
+        labelling of it (hypotheses.START_LABELLINGS) fitted beside it, to be compared over the next
+        hypothesis_frames frame sets. ValueError when the keypoints are too few to start from."""
         start = self.initial_parameters(views, found)
         if start is None:
             raise ValueError('too few views with keypoints to initialise (need root, neck and head in 2 views)')
-        _, self.track = min(self.each(lambda yaw: self.started_track(start, yaw, stamp, views, found),
-                                      (0.0,) + TORSO_START_YAWS), key=lambda outcome: outcome[0])
+        self.track = Track(start, LimbTracks(self.settings))
+        self.follow(self.track, stamp, views, found, canonical=True)
         self.track.cost = self.cost_of(self.track.parameters, views)
         self.rivals = self.each(lambda pairs: self.spawn(pairs, stamp, views, found),
                                 [pairs for _, pairs in START_LABELLINGS])
         self.window, self.starting, self.lost_fits = self.settings.hypothesis_frames, True, 0
-
-    def started_track(self, start, yaw, stamp, views, found):
-        """A Track fitted to a start's frame set from the parameters `start` (29,) (follow with `canonical`: the
-        torso searched from that pose turned by `yaw` [rad] about the vertical, the limbs also from the canonical
-        poses), and how well its fit explains the views (explaining_cost): (cost, Track)."""
-        track = Track(start, LimbTracks(self.settings))
-        self.follow(track, stamp, views, found, canonical=True, yaw=yaw)
-        return self.explaining_cost(track.parameters, views), track
 
     def each(self, function, items):
         """[function(item) for item in items], on the thread pool if there is one and this is not one of its
@@ -264,12 +253,11 @@ class SkeletonFitter:
                 self.track = best
         self.rivals, self.starting, self.since_probe = [], False, 0
 
-    def follow(self, track, stamp, views, found, canonical=False, yaw=0.0):
+    def follow(self, track, stamp, views, found, canonical=False):
         """Fit `track` to this frame set: from its last pose with the pelvis moved on (pelvis_shift; the
         smoothness prior centred there too), the frame's triangulated pairs labelled by its fits
         (LimbTracks.label);
-        `canonical`: a start, the torso searched from its pose turned by `yaw` [rad] and the limbs also from the
-        canonical poses."""
+        `canonical`: the limbs also searched from the canonical poses (a start)."""
         parameters = track.parameters.copy()
         labelled = None
         if track.limbs.history:
@@ -287,7 +275,7 @@ class SkeletonFitter:
         carried = None if after_gap else track.limbs.carried_legs(stamp)
         stale = track.limbs.after_gap(stamp, self.settings.outline_horizon)
         track.parameters, track.results = self.search_stages(parameters, views, labelled, canonical, last, stale,
-                                                             carried=carried, yaw=yaw)
+                                                             carried=carried)
         track.joints, _ = forward_kinematics(track.parameters, self.lengths)
         track.limbs.append(stamp, track.joints)
 
@@ -303,13 +291,17 @@ class SkeletonFitter:
         return limbs.predicted(stamp)[pelvis] - limbs.history[-1][1][pelvis]
 
     def cost_of(self, parameters, views):
-        """How well the pose `parameters` (29,) explains the views, as labellings are compared: its
-        explaining_cost, raised by up to face_cost_share as far as the pose's hips face away
+        """How well the pose `parameters` (29,) explains the views: the six stages' objectives (without the
+        smoothness prior, with the joint limits) with each view's left/right labels oriented to the pose
+        and the outline assigned from it; raised by up to face_cost_share as far as the pose's hips face away
         from the face the views see (face_right; hypotheses.face_away), by up to crossed_cost_share as far as its
         wrists cross, and its knees with the feet together while standing (hypotheses.crossed_cost: the speed is
         the fit's), and by foot_weight per px² of its feet outside the silhouettes (hypotheses.feet_outside)."""
-        cost = self.explaining_cost(parameters, views)
         joints, _ = forward_kinematics(parameters, self.stages.lengths)
+        oriented = [oriented_view(view, joints) for view in views]
+        frame = pack_frame(oriented)
+        nearest = self.stages.outline_nearest(parameters, frame)
+        cost = sum(self.stages.posed_cost(stage, parameters, oriented, frame, nearest) for stage in STAGE_NAMES)
         if self.face_right is not None:
             cost *= 1 + self.settings.face_cost_share * face_away(joints, self.face_right)
         cost = crossed_cost(cost, joints, self.track.limbs, self.settings)
@@ -318,23 +310,11 @@ class SkeletonFitter:
                                                              self.settings.ankle_height)
         return cost
 
-    def explaining_cost(self, parameters, views):
-        """How well the pose `parameters` (29,) explains the views' outlines and parts: the six stages' objectives
-        (without the smoothness prior, with the joint limits) with each view's left/right labels oriented to the
-        pose and the outline assigned from it. Front or back alike (a pose and the pose turned round explain a
-        silhouette nearly as well): the cues that tell them apart are cost_of's."""
-        joints, _ = forward_kinematics(parameters, self.stages.lengths)
-        oriented = [oriented_view(view, joints) for view in views]
-        frame = pack_frame(oriented)
-        nearest = self.stages.outline_nearest(parameters, frame)
-        return sum(self.stages.posed_cost(stage, parameters, oriented, frame, nearest) for stage in STAGE_NAMES)
-
-    def search_stages(self, parameters, views, found, canonical=False, last=None, stale=False, kept=None, carried=None,
-                      yaw=0.0):
+    def search_stages(self, parameters, views, found, canonical=False, last=None, stale=False, kept=None, carried=None):
         """The six stages of paper 000 Sec. 5.1 from `parameters` (29,); each stage after the torso's searched
         also from the frame's triangulated joints `found` ({joint: (3,)} or None) and, with `canonical` (a
-        start), the torso from its pose turned by `yaw` [rad] about the vertical and each limb stage also from
-        the canonical limb poses (limb_starts.py), the best result kept (Sec. 5.3). `last`: the last fit's
+        start), the torso also from its pose turned by TORSO_START_YAWS and each limb stage from the
+        canonical limb poses (limb_starts.py), the best result kept (Sec. 5.3). `last`: the last fit's
         parameters when `parameters` are already the triangulated limbs (a gap over velocity_horizon);
         `stale`: the last fit is over outline_horizon old; `kept`: {stage: StageResult} of stages not
         searched, `parameters` already their fit; `carried`: knees and ankles {name: (3,)} carried on from the
@@ -356,11 +336,13 @@ class SkeletonFitter:
                 continue
             assigned = self.stages.outline_assignment(stage, parameters, oriented, frame)
             if stage == 'torso' and canonical:
-                # The outline assigned from the pose the keypoints gave, whichever way the search starts (assigned
-                # from the turned pose instead, seed 107's tuning cases were 27 mm worse on mean: session 72).
-                turned = parameters.copy()
-                turned[TORSO_YAW] += yaw
-                searched, result = self.stages.search(stage, turned, oriented, assigned, frame)
+                def search_turned(yaw):
+                    turned = parameters.copy()
+                    turned[TORSO_YAW] += yaw
+                    return self.stages.search(stage, turned, oriented, assigned, frame)
+                # One assignment (from the start's pose) for all: their costs compare as they are.
+                searched, result = min(self.each(search_turned, (0.0,) + TORSO_START_YAWS),
+                                       key=lambda outcome: outcome[1].cost)
             elif stage == 'torso' or (found is None and not canonical):
                 searched, result = self.stages.search(stage, parameters, oriented, assigned, frame)
             else:
