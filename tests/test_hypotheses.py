@@ -32,13 +32,6 @@ MID_WALK = 28     # the walk's middle frames (of 66): the whole person in every 
 WITHIN = 10       # a wrong start must be right this many frame sets after it
 
 
-def no_start_hypotheses(monkeypatch):
-    """A start follows its own fit alone: no other labelling (START_LABELLINGS) and no turned start
-    (TORSO_START_YAWS) beside it."""
-    monkeypatch.setattr(fitter_module, 'START_LABELLINGS', ())
-    monkeypatch.setattr(fitter_module, 'TORSO_START_YAWS', ())
-
-
 @pytest.fixture(scope='module')
 def walk(cmu_walk):
     return rendered_views(cmu_walk.placed(heading=math.radians(30)), studio_rig((960, 540), cameras=[2, 5, 7]),
@@ -132,22 +125,6 @@ def test_a_start_turned_far_off_the_keypoints_yaw_finds_the_torso(walk, monkeypa
         assert error < 10 if searched else error > 25, error
 
 
-def test_a_start_follows_each_turned_fit_as_a_hypothesis(walk):
-    """A start follows its fit with the torso searched from the keypoints' pose turned by each of
-    TORSO_START_YAWS as a hypothesis of its own, beside the other labellings of the cheapest, so that the line
-    of facing is chosen over hypothesis_frames frame sets, not on one: with pruning off, all of them are
-    followed after the first frame set and the fit given out is the cheapest; after the window one is left."""
-    settings = FitterSettings(hypothesis_prune=1e9)
-    fitter = SkeletonFitter(settings)
-    fit = fitter.fit(0.0, walk[0][1])
-    tracks = [fitter.track] + fitter.rivals
-    assert len(tracks) == 1 + len(fitter_module.TORSO_START_YAWS) + len(START_LABELLINGS)
-    np.testing.assert_array_equal(fit.joints, min(tracks, key=lambda track: track.cost).joints)
-    for index in range(1, settings.hypothesis_frames):
-        assert fitter.fit(index / 25.0, walk[index][1]).initialised
-    assert not fitter.rivals and not fitter.starting
-
-
 def swapped_after_wrong_start(frames, pairs, monkeypatch, settings=None):
     """Fit the frames from a start whose triangulated pairs are labelled with `pairs` exchanged (as a start
     without a face to tell gets them): whether the start's own fit has any left/right pair nearer the other
@@ -185,7 +162,7 @@ def test_without_the_hypotheses_a_wrong_start_stays_wrong(frames, labelling, req
     limited: legs exchanged cross the body's middle, which the searches themselves then undo), the fit
     keeps the start's."""
     from mvpose_nodes.fitting import stage_search
-    no_start_hypotheses(monkeypatch)
+    monkeypatch.setattr(fitter_module, 'START_LABELLINGS', ())
     for leg in ('left_leg', 'right_leg'):
         monkeypatch.setitem(stage_search.TWIST_LIMITS, leg, stage_search.TWIST_LIMITS[leg][:-1] + ((-np.pi / 2, np.pi / 2),))
     _, swapped = swapped_after_wrong_start(request.getfixturevalue(frames), RELABELLINGS[labelling], monkeypatch,
@@ -199,7 +176,7 @@ def test_the_periodic_probe_rights_a_fit_turned_round(walk, monkeypatch, probed)
     legs) is right again once the fitter's periodic probe (hypotheses.PERIODIC_PROBE, every probe_period frame
     sets: 2 here), the body turned round, has explained the views better over hypothesis_frames; probing the
     arms exchanged instead leaves it turned round, so the check can fail."""
-    no_start_hypotheses(monkeypatch)
+    monkeypatch.setattr(fitter_module, 'START_LABELLINGS', ())
     if probed:
         monkeypatch.setattr(hypotheses_module, 'PERIODIC_PROBE', probed)
     _, swapped = swapped_after_wrong_start(walk, RELABELLINGS['turned round'], monkeypatch,
@@ -232,7 +209,7 @@ def test_the_frame_set_on_which_a_rival_wins_gives_out_the_rivals_fit(walk, monk
 def stride_probes(frames, settings, monkeypatch):
     """Fit `frames` from the true start (no start hypotheses) and return, at each frame set, the fit's ankles'
     distance [m] and whether the legs exchanged were probed there, and the person's leg length [m]."""
-    no_start_hypotheses(monkeypatch)
+    monkeypatch.setattr(fitter_module, 'START_LABELLINGS', ())
     probed = []
     probe = SkeletonFitter.probe
     monkeypatch.setattr(SkeletonFitter, 'probe', lambda self, *args: probed.append(args[-1]) or probe(self, *args))
@@ -277,7 +254,7 @@ def test_crossed_knees_standing_and_crossed_wrists_cost_more_and_are_probed(turn
     from mvpose_nodes.fitting.hypotheses import pair_crossing
     from mvpose_nodes.fitting.limb_sides import exchanged_pairs
     other = {'knee': 'wrist', 'wrist': 'knee'}[pair]
-    no_start_hypotheses(monkeypatch)
+    monkeypatch.setattr(fitter_module, 'START_LABELLINGS', ())
     share = FitterSettings().crossed_cost_share
     for frames, standing in ((turn, True), (walk, False)):
         judged = standing or pair == 'wrist'
@@ -299,7 +276,7 @@ def test_crossed_knees_standing_and_crossed_wrists_cost_more_and_are_probed(turn
         monkeypatch.setattr(hypotheses_module, 'pair_crossing', lambda joints, limb: 0.1 if limb == pair else 0.0)
         fitter.fit(3 / 25.0, views)
         monkeypatch.undo()
-        no_start_hypotheses(monkeypatch)
+        monkeypatch.setattr(fitter_module, 'START_LABELLINGS', ())
         assert probed == ([labelling] if judged else []), probed
 
 
@@ -339,10 +316,8 @@ def test_the_face_the_views_see_weighs_on_front_and_back(standing, monkeypatch):
     weighs the face ten times its cost ends turned round, where one that asks nothing of the face does not.
     (At the default share the face decides only what the objective leaves close: here the waving arms'
     bent elbows already tell, so the inverted face does not turn the fit; on the suite's features it does
-    decide, docs/method.md.) Only the labellings are compared here, no turned start: a pose side on to the face
-    pays nothing of it (face_away), so a face on the back weighed ten times would keep one of those."""
+    decide, docs/method.md.)"""
     from dataclasses import replace
-    monkeypatch.setattr(fitter_module, 'TORSO_START_YAWS', ())
     _, swapped = swapped_after_wrong_start(standing, RELABELLINGS['turned round'], monkeypatch)
     assert not any(swapped[WITHIN:]), swapped
     face_behind = [(truth, [replace(view, frontness=1.0 - view.frontness) for view in views])
@@ -357,9 +332,7 @@ def test_the_face_is_not_asked_of_hair_read_as_skin(standing, monkeypatch):
     hair that is not skin above the face (its skin starting 0.2 of the head's height below the head's top:
     View.hair_gap). Where the skin reaches the top of the head in every view (hair_gap 0, as blond or light
     brown hair read as skin gives it, and then reads as a face from behind too), the face is not asked
-    (initialisation.face_tells) and the fit faces the right way WITHIN frame sets after a wrong start. (The
-    labellings only, as above.)"""
-    monkeypatch.setattr(fitter_module, 'TORSO_START_YAWS', ())
+    (initialisation.face_tells) and the fit faces the right way WITHIN frame sets after a wrong start."""
     for gap, turned in ((0.2, True), (0.0, False)):
         face_behind = [(truth, [replace(view, frontness=1.0 - view.frontness, hair_gap=gap) for view in views])
                        for truth, views in standing]

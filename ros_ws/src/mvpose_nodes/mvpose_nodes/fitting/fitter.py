@@ -26,9 +26,9 @@ body limited as anatomy limits them (stage_search.TWIST_LIMITS), a bent knee or 
 wrong way, nor do limbs crossed, so the objective tells them apart (and where the pose cannot, the way
 the feet point in the silhouettes and the face the views see): after a start, every other labelling is
 followed beside the fit for hypothesis_frames frame sets (those clearly worse dropped on the way:
-hypothesis_prune), and so is the start's fit with its torso turned by each of TORSO_START_YAWS, and the one
-whose fits explain the views best is kept; after that, one other labelling at a time is followed so, every
-probe_period frame sets, and taken when it explains the views clearly better. Every tuning constant is a field of settings.FitterSettings.
+hypothesis_prune), and the one whose fits explain the views best is kept; after that, one other labelling
+at a time is followed so, every probe_period frame sets, and taken when it explains the views clearly
+better. Every tuning constant is a field of settings.FitterSettings.
 """
 import threading
 import time
@@ -61,7 +61,7 @@ TORSO_YAW = PARAMETER_INDEX['torso_rz']   # the body's turn about the vertical [
 # hypotheses decide): the facing from the keypoints (initialisation.completed_joints, the limbs' left-to-right
 # offsets) is 40-90 degrees off for a runner or walker mid-stride, whose ankles and wrists lie apart along
 # the way they go (in 20 of the suite's 46 tuning cases of seeds 1-4), and one search does not turn the
-# torso that far (search_stages). Each turned start is followed as a hypothesis (SkeletonFitter.start).
+# torso that far (search_stages).
 TORSO_START_YAWS = tuple(np.pi * eighth / 4 for eighth in (-2, -1, 1, 2))
 HAIR_VIEWS = 500   # the person's hair_gap is measured on this many views (400 in a 50-frame case of 8 cameras), no more
 
@@ -190,29 +190,17 @@ class SkeletonFitter:
                    unexplained if self.lost_fits >= settings.lost_frames else 0.0, tuple(v.camera.number for v in views))
 
     def start(self, stamp, views, found):
-        """A (re)start: the pose from the frame's keypoints (initial_parameters), fitted with its torso
-        searched from it and, each a hypothesis of its own, from it turned by each of TORSO_START_YAWS; the
-        one that explains the views best (cost_of) is the fit, and every other labelling of it
-        (hypotheses.START_LABELLINGS) is fitted beside them, all to be compared over the next
-        hypothesis_frames frame sets. Why the turned fits are followed, not chosen on this frame set: the
-        line of facing a single frame set's costs choose is 15-18 degrees off on average on the suite's
-        features, and a runner's 70-110 (docs/method.md, session 72). ValueError when the keypoints are
-        too few to start from."""
+        """A (re)start: the pose from the frame's keypoints (initial_parameters), fitted, and every other
+        labelling of it (hypotheses.START_LABELLINGS) fitted beside it, to be compared over the next
+        hypothesis_frames frame sets. ValueError when the keypoints are too few to start from."""
         start = self.initial_parameters(views, found)
         if start is None:
             raise ValueError('too few views with keypoints to initialise (need root, neck and head in 2 views)')
-
-        def turned(yaw):
-            track = Track(start.copy(), LimbTracks(self.settings))
-            self.follow(track, stamp, views, found, canonical=True, yaw=yaw)
-            return track
-        tracks = self.each(turned, (0.0,) + TORSO_START_YAWS)
-        self.track = tracks[0]   # cost_of reads the fit's speed from it: none yet, alike for all
-        for track in tracks:
-            track.cost = self.cost_of(track.parameters, views)
-        self.track = min(tracks, key=lambda track: track.cost)
-        self.rivals = [track for track in tracks if track is not self.track] + self.each(
-            lambda pairs: self.spawn(pairs, stamp, views, found), [pairs for _, pairs in START_LABELLINGS])
+        self.track = Track(start, LimbTracks(self.settings))
+        self.follow(self.track, stamp, views, found, canonical=True)
+        self.track.cost = self.cost_of(self.track.parameters, views)
+        self.rivals = self.each(lambda pairs: self.spawn(pairs, stamp, views, found),
+                                [pairs for _, pairs in START_LABELLINGS])
         self.window, self.starting, self.lost_fits = self.settings.hypothesis_frames, True, 0
 
     def each(self, function, items):
@@ -265,12 +253,11 @@ class SkeletonFitter:
                 self.track = best
         self.rivals, self.starting, self.since_probe = [], False, 0
 
-    def follow(self, track, stamp, views, found, canonical=False, yaw=0.0):
+    def follow(self, track, stamp, views, found, canonical=False):
         """Fit `track` to this frame set: from its last pose with the pelvis moved on (pelvis_shift; the
         smoothness prior centred there too), the frame's triangulated pairs labelled by its fits
         (LimbTracks.label);
-        `canonical`: a start's, its torso searched from its pose turned by `yaw` [rad], its limbs also from the
-        canonical poses (search_stages)."""
+        `canonical`: the limbs also searched from the canonical poses (a start)."""
         parameters = track.parameters.copy()
         labelled = None
         if track.limbs.history:
@@ -288,7 +275,7 @@ class SkeletonFitter:
         carried = None if after_gap else track.limbs.carried_legs(stamp)
         stale = track.limbs.after_gap(stamp, self.settings.outline_horizon)
         track.parameters, track.results = self.search_stages(parameters, views, labelled, canonical, last, stale,
-                                                             carried=carried, yaw=yaw)
+                                                             carried=carried)
         track.joints, _ = forward_kinematics(track.parameters, self.lengths)
         track.limbs.append(stamp, track.joints)
 
@@ -323,11 +310,10 @@ class SkeletonFitter:
                                                              self.settings.ankle_height)
         return cost
 
-    def search_stages(self, parameters, views, found, canonical=False, last=None, stale=False, kept=None, carried=None,
-                      yaw=0.0):
+    def search_stages(self, parameters, views, found, canonical=False, last=None, stale=False, kept=None, carried=None):
         """The six stages of paper 000 Sec. 5.1 from `parameters` (29,); each stage after the torso's searched
         also from the frame's triangulated joints `found` ({joint: (3,)} or None) and, with `canonical` (a
-        start), the torso from its pose turned by `yaw` [rad] about the vertical and each limb stage from the
+        start), the torso also from its pose turned by TORSO_START_YAWS and each limb stage from the
         canonical limb poses (limb_starts.py), the best result kept (Sec. 5.3). `last`: the last fit's
         parameters when `parameters` are already the triangulated limbs (a gap over velocity_horizon);
         `stale`: the last fit is over outline_horizon old; `kept`: {stage: StageResult} of stages not
@@ -350,12 +336,13 @@ class SkeletonFitter:
                 continue
             assigned = self.stages.outline_assignment(stage, parameters, oriented, frame)
             if stage == 'torso' and canonical:
-                turned = parameters.copy()
-                turned[TORSO_YAW] += yaw
-                # The outline assigned from the start's pose for every turn, as when the turned searches were
-                # compared by this stage's cost alone (assigned from each turned pose, session 72's variant
-                # did worse on seed 107).
-                searched, result = self.stages.search(stage, turned, oriented, assigned, frame)
+                def search_turned(yaw):
+                    turned = parameters.copy()
+                    turned[TORSO_YAW] += yaw
+                    return self.stages.search(stage, turned, oriented, assigned, frame)
+                # One assignment (from the start's pose) for all: their costs compare as they are.
+                searched, result = min(self.each(search_turned, (0.0,) + TORSO_START_YAWS),
+                                       key=lambda outcome: outcome[1].cost)
             elif stage == 'torso' or (found is None and not canonical):
                 searched, result = self.stages.search(stage, parameters, oriented, assigned, frame)
             else:
