@@ -155,6 +155,8 @@ class StuckNode(Node):
         hang_in_c()
 
     def destroy_node(self):
+        if HANG_IN == 'clean-up holding the GIL':   # where no Python thread can run (as destroy_or_exit's test)
+            ctypes.PyDLL(None).sleep(600)
         time.sleep(600)
 
 
@@ -162,15 +164,20 @@ sys.exit(helpers.run_node(StuckNode))
 '''
 
 
-@pytest.mark.parametrize('hang_in', ['clean-up', 'callback'])
+@pytest.mark.parametrize('hang_in', ['clean-up', 'callback', 'clean-up holding the GIL'])
 def test_a_node_that_hangs_after_ctrl_c_still_exits(tmp_path, hang_in):
     """run_node: a node that hangs after Ctrl-C, in its clean-up or in the executor, says so and exits
-    STOP_LIMIT after (no orphan left behind its launcher, and within the launcher's SIGINT grace)."""
+    STOP_LIMIT after (no orphan left behind its launcher, and within the launcher's SIGINT grace); where the
+    clean-up hangs holding the GIL (no Python thread runs), the stacks are printed and the C library's timer
+    ends it EXIT_TIMER_DELAY later."""
     script = tmp_path / 'stuck.py'
     script.write_text(STUCK_NODE_SCRIPT)
     result = run_mvpose('exec', 'python', script, hang_in, timeout=30)
-    assert ('StuckNode: still running 1 s after it was asked to stop (hung in rclpy); exiting without cleaning up'
-            in result.stderr), result.stderr
+    if hang_in == 'clean-up holding the GIL':
+        assert 'still running' not in result.stderr and 'in destroy_node' in result.stderr, result.stderr
+    else:
+        assert ('StuckNode: still running 1 s after it was asked to stop (hung in rclpy); exiting without cleaning '
+                'up' in result.stderr), result.stderr
 
 
 TEARDOWN_SCRIPT = '''

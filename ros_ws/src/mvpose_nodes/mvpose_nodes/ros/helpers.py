@@ -77,11 +77,19 @@ def run_node(make_node, args=None):
     the default SingleThreadedExecutor per callback (the skeleton_fitter's rclpy share 9 -> 3 ms per
     frame set, each camera_features' 3 -> 1.5; `./mvpose bench`). Its spin() busy-loops at 100 % of a
     core and ignores Ctrl-C in this rclpy (7.1.6), so it is spun in steps of SPIN_PERIOD, after each of
-    which a shutdown (the signal handler's) is seen."""
+    which a shutdown (the signal handler's) is seen.
+
+    The clean-up may hang in rclpy holding the GIL, where watch_stop's thread cannot run (as destroy_node did
+    in a tool, destroy_or_exit): from the clean-up's start the process is ended STOP_LIMIT + EXIT_TIMER_DELAY
+    later by the C library's timer (exit_timer) with the node's exit code (1 for an error not handled here, as
+    Python's), after faulthandler has printed every thread's stack. So run_node ends its process's work: call
+    it last."""
     keep_freed_memory()
     rclpy.init(args=args)
-    watch_stop(rclpy.get_default_context(), getattr(make_node, '__name__', 'node'))
+    name = getattr(make_node, '__name__', 'node')
+    watch_stop(rclpy.get_default_context(), name)
     node = None
+    code = 0
     executor = EventsExecutor()
     try:
         node = make_node()
@@ -91,14 +99,17 @@ def run_node(make_node, args=None):
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except (ParameterError, SkinModelError) as error:
-        print(f'[ERROR] {make_node.__name__}: {error}', file=sys.stderr)
-        return 2
+        print(f'[ERROR] {name}: {error}', file=sys.stderr)
+        code = 2
     finally:
+        faulthandler.dump_traceback_later(STOP_LIMIT + EXIT_TIMER_DELAY / 2)
+        # An error none of the above handles is on its way out: Python would exit with 1.
+        exit_timer(STOP_LIMIT + EXIT_TIMER_DELAY, 1 if sys.exc_info()[0] is not None else code)
         executor.shutdown()
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
-    return 0
+    return code
 
 
 def keep_freed_memory():
@@ -117,7 +128,8 @@ def keep_freed_memory():
 def watch_stop(context, name):
     """A daemon thread that ends the process STOP_LIMIT seconds after `context` was shut down, if it still
     runs then. rclpy's signal handler shuts the context down from a thread of its own on Ctrl-C and SIGTERM, so
-    this holds wherever the main thread hangs: in the executor or in the clean-up."""
+    this holds wherever the main thread hangs, in the executor or in the clean-up, unless it holds the GIL there,
+    which stops this thread too (for the clean-up run_node arms exit_timer)."""
     def watch():
         while context.ok():
             time.sleep(SPIN_PERIOD)
