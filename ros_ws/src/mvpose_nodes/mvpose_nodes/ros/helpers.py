@@ -81,9 +81,8 @@ def run_node(make_node, args=None):
 
     The clean-up may hang in rclpy holding the GIL, where watch_stop's thread cannot run (as destroy_node did
     in a tool, destroy_or_exit): from the clean-up's start the process is ended STOP_LIMIT + EXIT_TIMER_DELAY
-    later by the C library's timer (exit_timer) with the node's exit code (1 for an error not handled here, as
-    Python's), after faulthandler has printed every thread's stack. So run_node ends its process's work: call
-    it last."""
+    later (end_if_hung) with the node's exit code (1 for an error not handled here, as Python's), after every
+    thread's stack is printed. So run_node ends its process's work: call it last."""
     keep_freed_memory()
     rclpy.init(args=args)
     name = getattr(make_node, '__name__', 'node')
@@ -102,9 +101,8 @@ def run_node(make_node, args=None):
         print(f'[ERROR] {name}: {error}', file=sys.stderr)
         code = 2
     finally:
-        faulthandler.dump_traceback_later(STOP_LIMIT + EXIT_TIMER_DELAY / 2)
         # An error none of the above handles is on its way out: Python would exit with 1.
-        exit_timer(STOP_LIMIT + EXIT_TIMER_DELAY, 1 if sys.exc_info()[0] is not None else code)
+        end_if_hung(1 if sys.exc_info()[0] is not None else code)
         executor.shutdown()
         if node is not None:
             node.destroy_node()
@@ -144,16 +142,24 @@ def destroy_or_exit(node, name, code):
     threads at the interpreter's exit), it says so and ends with `code` all the same. A Python thread watches
     and says so while the interpreter can run it; but rclpy has hung in destroy_node holding the GIL (a `topic
     echo --count 5` that had printed its five messages, sessions 42 and 70), and then no Python thread runs:
-    for that a POSIX timer (exit_timer) ends the process EXIT_TIMER_DELAY later, after faulthandler, which
-    needs no GIL either, has printed every thread's stack."""
+    for that a POSIX timer ends the process EXIT_TIMER_DELAY later, after every thread's stack is printed
+    (end_if_hung)."""
     def watch():
         time.sleep(STOP_LIMIT)
         abandon(name, 'its work was done', code)
     threading.Thread(target=watch, name='teardown watchdog', daemon=True).start()
-    faulthandler.dump_traceback_later(STOP_LIMIT + EXIT_TIMER_DELAY / 2)
-    exit_timer(STOP_LIMIT + EXIT_TIMER_DELAY, code)
+    end_if_hung(code)
     node.destroy_node()
     return code
+
+
+def end_if_hung(code):
+    """The last resort of a process's clean-up, whatever its threads do: every thread's stack printed
+    (faulthandler, which needs no GIL) STOP_LIMIT + EXIT_TIMER_DELAY / 2 from now, and the process ended with
+    `code` EXIT_TIMER_DELAY after STOP_LIMIT (exit_timer), if it still runs then; the Python watchdogs, which
+    say why at STOP_LIMIT, come first where the GIL lets them."""
+    faulthandler.dump_traceback_later(STOP_LIMIT + EXIT_TIMER_DELAY / 2)
+    exit_timer(STOP_LIMIT + EXIT_TIMER_DELAY, code)
 
 
 def exit_timer(seconds, code):
